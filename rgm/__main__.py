@@ -1,0 +1,5 @@
+import sys
+
+from rgm.cli import main
+
+sys.exit(main())
