@@ -1,6 +1,8 @@
 """The `rgm.*` namespace is assembled from top-level folders by setuptools `package-dir`; a package that
 is not listed in pyproject.toml works in an editable install but is missing from `pip install .`."""
-import tomllib
+import pytest
+
+tomllib = pytest.importorskip("tomllib")  # Python >= 3.11
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]

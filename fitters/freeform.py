@@ -1,0 +1,403 @@
+"""Free-form fitting: least-squares B-spline curves and surfaces refined by knot insertion to a tolerance.
+
+The paper's recipe (its Figure 6 for a profile, Figure 5 for the face mask): start from a coarse knot
+vector whose size comes from a surface characterisation, solve for the control points in the least-squares
+sense, measure the error of every data point, insert knots in the middle of *only those knot spans* whose
+points exceed the tolerance, and solve again, until the certified statistic holds or a stated limit on
+control points is reached.
+
+The error of a data point is its parametric residual |S(u_i, v_i) - P_i| (model units). It is an upper
+bound of the point's closest-point distance to the surface, so a fit certified with it is conservative.
+
+Spaces are nested under knot insertion, so the unsmoothed least-squares error can only fall; with the small
+smoothing term (which keeps spans without data well posed) a refinement step that would raise the error is
+replaced by the previous surface with the knots inserted (same shape), so the certified error never rises.
+
+Linear algebra: design matrices come from `scipy.interpolate.BSpline.design_matrix` (sparse CSR, p+1
+non-zeros a row); scattered data use sparse normal equations of the row-wise Kronecker product (p+1)(q+1)
+non-zeros a row; full grids use the separable solve C = (Bu'Bu + λRu)^-1 Bu' Z Bv (Bv'Bv + λRv)^-1
+(Piegl & Tiller §9.4 for the least-squares set-up).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+import scipy.sparse.linalg
+from scipy.interpolate import BSpline
+
+from rgm.errors import GeometryError
+
+
+# --------------------------------------------------------------------------------------------- knots
+def clamped_knots(degree: int, interior) -> np.ndarray:
+    """Clamped knot vector on [0, 1] with the given interior knots: (n + degree + 1,)."""
+    interior = np.sort(np.asarray(interior, float))
+    return np.r_[np.zeros(degree + 1), interior, np.ones(degree + 1)]
+
+
+def uniform_knots(degree: int, n_ctrl: int) -> np.ndarray:
+    """Clamped knot vector with uniform interior knots for `n_ctrl` control points."""
+    if n_ctrl < degree + 1:
+        raise GeometryError(f"{n_ctrl} control points are too few for degree {degree}")
+    return clamped_knots(degree, np.linspace(0.0, 1.0, n_ctrl - degree + 1)[1:-1])
+
+
+def design_matrix(x: np.ndarray, knots: np.ndarray, degree: int) -> sp.csr_matrix:
+    """Sparse B-spline basis matrix N (m, n) with N[i, j] = N_j,p(x_i); x within the knot domain."""
+    x = np.clip(np.asarray(x, float), knots[degree], knots[-degree - 1])
+    return BSpline.design_matrix(x, knots, degree).tocsr()
+
+
+def _second_difference(n: int) -> sp.csr_matrix:
+    """(n-2, n) second-difference operator: a discrete bending energy of a control polygon."""
+    if n < 3:
+        return sp.csr_matrix((0, n))
+    return sp.diags([np.ones(n - 2), -2 * np.ones(n - 2), np.ones(n - 2)], [0, 1, 2], shape=(n - 2, n)).tocsr()
+
+
+def _span_index(x: np.ndarray, knots: np.ndarray, degree: int) -> tuple[np.ndarray, np.ndarray]:
+    """Index of the non-empty knot span holding each x, and the span breakpoints (distinct knots)."""
+    breaks = np.unique(knots[degree:len(knots) - degree])
+    idx = np.clip(np.searchsorted(breaks, x, side="right") - 1, 0, len(breaks) - 2)
+    return idx, breaks
+
+
+def _spans_to_split(x, res, knots, degree, tol, min_width, greed=0.5):
+    """Midpoints of the spans to refine: those whose worst residual exceeds both `tol` and `greed` times
+    the worst residual of all (spans narrower than `min_width` are kept). Splitting only the worst spans
+    each round (a least-squares error spreads over neighbouring spans) avoids over-refining."""
+    idx, breaks = _span_index(x, knots, degree)
+    worst = np.zeros(len(breaks) - 1)
+    np.maximum.at(worst, idx, res)
+    bad = (worst > max(tol, greed * worst.max())) & (np.diff(breaks) > min_width)
+    return 0.5 * (breaks[:-1] + breaks[1:])[bad]
+
+
+# --------------------------------------------------------------------------------------------- results
+@dataclass(frozen=True)
+class FitStats:
+    """Deviation figures of a fit, model units. `statistic` names what `value` is (and what tol bounds)."""
+
+    points: int
+    max: float
+    rms: float
+    p95: float
+    statistic: str
+    value: float
+    tol: float
+
+    @property
+    def met(self) -> bool:
+        return self.value <= self.tol
+
+
+def fit_stats(res: np.ndarray, tol: float, statistic: str) -> FitStats:
+    res = np.asarray(res, float)
+    value = float(res.max()) if statistic == "max" else float(np.percentile(res, float(statistic.lstrip("p"))))
+    return FitStats(len(res), float(res.max()), float(np.sqrt(np.mean(res**2))),
+                    float(np.percentile(res, 95)), statistic, value, float(tol))
+
+
+@dataclass(frozen=True)
+class CurveFit:
+    degree: int
+    knots: np.ndarray
+    ctrl: np.ndarray          # (n, d)
+    stats: FitStats
+    history: tuple = ()        # (n_ctrl, value) after each solve
+    stopped: str = ""          # why refinement stopped when the tolerance is not met
+
+
+@dataclass(frozen=True)
+class SurfaceFit:
+    degree_u: int
+    degree_v: int
+    knots_u: np.ndarray
+    knots_v: np.ndarray
+    ctrl: np.ndarray          # (nu, nv, 3)
+    stats: FitStats
+    residuals: np.ndarray = field(repr=False)
+    history: tuple = ()
+    stopped: str = ""
+
+    @property
+    def n_ctrl(self) -> int:
+        return self.ctrl.shape[0] * self.ctrl.shape[1]
+
+    def nurbs(self):
+        from rgm.geometry import NurbsSurface
+
+        return NurbsSurface(self.degree_u, self.degree_v, self.knots_u, self.knots_v, self.ctrl, None)
+
+
+# --------------------------------------------------------------------------------------------- curves
+def chord_parameters(points: np.ndarray) -> np.ndarray:
+    """Chord-length parameters in [0, 1] for an ordered polyline (m, d) (Piegl & Tiller eq. 9.5)."""
+    d = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    s = np.r_[0.0, np.cumsum(d)]
+    if s[-1] <= 0:
+        raise GeometryError("all points of the curve coincide")
+    return s / s[-1]
+
+
+def _solve_curve(t, points, knots, degree, smoothing, fix_ends):
+    B = design_matrix(t, knots, degree)
+    n = B.shape[1]
+    D = _second_difference(n)
+    M = (B.T @ B).toarray()
+    lam = smoothing * np.trace(M) / max(n, 1)
+    M += lam * (D.T @ D).toarray()
+    rhs = B.T @ points
+    if fix_ends:  # interpolate the first and last point: eliminate those two control points
+        ends = np.array([0, n - 1])
+        inner = np.arange(1, n - 1)
+        ctrl = np.empty((n, points.shape[1]))
+        ctrl[0], ctrl[-1] = points[0], points[-1]
+        rhs_i = rhs[inner] - M[np.ix_(inner, ends)] @ ctrl[ends]
+        ctrl[inner] = scipy.linalg.solve(M[np.ix_(inner, inner)], rhs_i, assume_a="pos")
+        return ctrl, B
+    return scipy.linalg.solve(M, rhs, assume_a="pos"), B
+
+
+def fit_curve(points, tol: float, *, params=None, degree: int = 3, n_initial: int | None = None,
+              max_ctrl: int = 500, statistic: str = "max", smoothing: float = 1e-9,
+              fix_ends: bool = True) -> CurveFit:
+    """Least-squares B-spline curve through ordered `points` (m, d), refined by knot insertion until the
+    `statistic` ("max" or e.g. "p99") of the residuals is <= `tol` (model units) or `max_ctrl` is reached.
+
+    The paper's Figure 6: only spans whose points exceed the tolerance receive a new knot.
+    """
+    points = np.asarray(points, float)
+    if points.ndim != 2 or len(points) < degree + 1 or not np.isfinite(points).all():
+        raise GeometryError(f"need at least {degree + 1} finite points to fit a degree-{degree} curve")
+    t = chord_parameters(points) if params is None else np.asarray(params, float)
+    knots = uniform_knots(degree, n_initial or degree + 1)
+    history, prev = [], None
+    min_width = 1.0 / max(len(points), 1)
+    while True:
+        ctrl, B = _solve_curve(t, points, knots, degree, smoothing, fix_ends)
+        res = np.linalg.norm(B @ ctrl - points, axis=1)
+        stats = fit_stats(res, tol, statistic)
+        if prev is not None and stats.value > prev[2].value:  # keep the better, refined shape
+            ctrl = refinement_matrix(prev[1], knots, degree) @ prev[0]
+            res = np.linalg.norm(B @ ctrl - points, axis=1)
+            stats = fit_stats(res, tol, statistic)
+        history.append((len(ctrl), stats.value))
+        if stats.met:
+            return CurveFit(degree, knots, ctrl, stats, tuple(history))
+        new = _spans_to_split(t, res, knots, degree, tol, min_width)
+        if len(new) == 0:
+            return CurveFit(degree, knots, ctrl, stats, tuple(history), "no span can be split further")
+        if len(ctrl) + len(new) > max_ctrl:
+            return CurveFit(degree, knots, ctrl, stats, tuple(history), f"control-point limit {max_ctrl} reached")
+        prev = (ctrl, knots, stats)
+        knots = np.sort(np.r_[knots, new])
+
+
+def refinement_matrix(knots, new_knots, degree) -> np.ndarray:
+    """Matrix R (n_new, n_old) with N_old = N_new R, so that control points P_new = R P_old describe the
+    same spline on the refined knot vector. Computed as an exact least-squares projection on a sample
+    that is unisolvent for the refined space (the spaces are nested, so the residual is round-off)."""
+    breaks = np.unique(new_knots)
+    s = np.unique(breaks[:-1, None] + np.diff(breaks)[:, None] * np.linspace(0.0, 1.0, degree + 2))
+    Bo = design_matrix(s, knots, degree).toarray()
+    Bn = design_matrix(s, new_knots, degree).toarray()
+    return np.linalg.lstsq(Bn, Bo, rcond=None)[0]
+
+
+# --------------------------------------------------------------------------------------------- surfaces
+def grid_parameters(grid: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Averaged chord-length parameters (rows,), (cols,) in [0, 1] of a point grid (rows, cols, 3)
+    (Piegl & Tiller eq. 9.8-9.9); invalid cells (mask False) are skipped in the averages."""
+    def along(g, m):
+        d = np.linalg.norm(np.diff(g, axis=0), axis=2)
+        ok = m[1:] & m[:-1]
+        d = np.where(ok, d, np.nan)
+        step = np.nanmedian(d, axis=1)
+        step = np.where(np.isfinite(step) & (step > 0), step, np.nan)
+        fill = np.nanmedian(step) if np.isfinite(step).any() else 1.0
+        step = np.where(np.isfinite(step), step, fill)
+        c = np.r_[0.0, np.cumsum(step)]
+        return c / c[-1]
+    mask = np.ones(grid.shape[:2], bool) if mask is None else mask
+    return along(grid, mask), along(grid.transpose(1, 0, 2), mask.T)
+
+
+def plane_parameters(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Parameters of scattered points by projection onto their best-fit (PCA) plane, scaled to [0, 1]².
+
+    Returns u, v (n,) and the 3x3 frame (rows: u axis, v axis, normal)."""
+    c = points.mean(axis=0)
+    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
+    uv = (points - c) @ vt[:2].T
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    if np.any(hi - lo <= 0):
+        raise GeometryError("the points are collinear: no surface can be parameterised over them")
+    uv = (uv - lo) / (hi - lo)
+    return uv[:, 0], uv[:, 1], vt
+
+
+def _rowwise_kron(Bu: sp.csr_matrix, Bv: sp.csr_matrix, nv: int) -> sp.csr_matrix:
+    """Row-wise Kronecker product: row i is Bu[i] (x) Bv[i], (p+1)(q+1) non-zeros per row."""
+    m = Bu.shape[0]
+    ku = np.diff(Bu.indptr)[0] if m else 0
+    kv = np.diff(Bv.indptr)[0] if m else 0
+    cu, du = Bu.indices.reshape(m, ku), Bu.data.reshape(m, ku)
+    cv, dv = Bv.indices.reshape(m, kv), Bv.data.reshape(m, kv)
+    cols = (cu[:, :, None] * nv + cv[:, None, :]).reshape(m, -1)
+    data = (du[:, :, None] * dv[:, None, :]).reshape(m, -1)
+    indptr = np.arange(0, m * ku * kv + 1, ku * kv)
+    return sp.csr_matrix((data.ravel(), cols.ravel(), indptr), shape=(m, Bu.shape[1] * nv))
+
+
+def _smoothing_matrix(nu: int, nv: int) -> sp.csr_matrix:
+    """Bending energy of a control net: second differences along u and along v, (nu nv, nu nv)."""
+    Du, Dv = _second_difference(nu), _second_difference(nv)
+    return (sp.kron(Du.T @ Du, sp.identity(nv)) + sp.kron(sp.identity(nu), Dv.T @ Dv)).tocsr()
+
+
+def solve_scattered(u, v, points, ku, kv, p, q, smoothing=1e-6):
+    """Least-squares control net (nu, nv, 3) for scattered points (n, 3) at parameters (u, v),
+    with a bending-energy term weighted by `smoothing` relative to the data term. Returns (ctrl, A)."""
+    Bu, Bv = design_matrix(u, ku, p), design_matrix(v, kv, q)
+    nu, nv = Bu.shape[1], Bv.shape[1]
+    A = _rowwise_kron(Bu, Bv, nv)
+    M = (A.T @ A).tocsc()
+    R = _smoothing_matrix(nu, nv)
+    lam = smoothing * M.diagonal().sum() / max(R.diagonal().sum(), 1e-300)
+    M = (M + lam * R + 1e-14 * M.diagonal().max() * sp.identity(nu * nv)).tocsc()
+    rhs = A.T @ points
+    if nu * nv <= 2500:
+        ctrl = scipy.linalg.solve(M.toarray(), rhs, assume_a="pos")
+    else:
+        lu = scipy.sparse.linalg.splu(M)
+        ctrl = lu.solve(rhs)
+    return ctrl.reshape(nu, nv, 3), A
+
+
+def solve_grid(u, v, grid, ku, kv, p, q, smoothing=1e-6):
+    """Separable least squares for a full grid (rows, cols, 3): C = Mu^-1 Bu' Z Bv Mv^-1 with
+    Mu = Bu'Bu + λ Du'Du (likewise v). Returns (ctrl (nu, nv, 3), Bu, Bv)."""
+    Bu, Bv = design_matrix(u, ku, p), design_matrix(v, kv, q)
+
+    def normal(B):
+        M = (B.T @ B).toarray()
+        D = _second_difference(B.shape[1])
+        return M + smoothing * np.trace(M) / max(B.shape[1], 1) * (D.T @ D).toarray()
+
+    Mu, Mv = normal(Bu), normal(Bv)
+    rows, cols = grid.shape[:2]
+    T = (Bu.T @ grid.reshape(rows, -1)).reshape(Bu.shape[1], cols, 3)          # (nu, cols, 3)
+    T = np.stack([(Bv.T @ T[:, :, k].T).T for k in range(3)], axis=2)          # (nu, nv, 3)
+    T = scipy.linalg.cho_solve(scipy.linalg.cho_factor(Mu), T.reshape(Bu.shape[1], -1)).reshape(T.shape)
+    ctrl = scipy.linalg.cho_solve(scipy.linalg.cho_factor(Mv), T.transpose(1, 0, 2).reshape(Bv.shape[1], -1))
+    return ctrl.reshape(Bv.shape[1], Bu.shape[1], 3).transpose(1, 0, 2), Bu, Bv
+
+
+def initial_net_size(grid: np.ndarray | None, mask, degree: int, n_points: int) -> int:
+    """Initial control points per direction from a surface characterisation: the number of geometrically
+    homogeneous patches (connected regions of equal sign of mean and Gaussian curvature, estimated on the
+    data grid) sets the net size, as in the paper; without a grid, the point count sets a coarse size."""
+    if grid is None or min(grid.shape[:2]) < 7:
+        return degree + 1 + int(np.clip(np.sqrt(n_points) / 40, 0, 6))
+    from scipy import ndimage
+
+    z = grid[..., 2] if mask is None else np.where(mask, grid[..., 2], np.nan)
+    zs = ndimage.uniform_filter(np.nan_to_num(z, nan=np.nanmean(z)), size=5)
+    zu, zv = np.gradient(zs)
+    zuu, zuv = np.gradient(zu)
+    _, zvv = np.gradient(zv)
+    H = zuu + zvv
+    K = zuu * zvv - zuv**2
+    eps_h, eps_k = 0.1 * np.nanstd(H), 0.1 * np.nanstd(K)
+    label = 3 * np.sign(np.where(np.abs(H) > eps_h, H, 0)) + np.sign(np.where(np.abs(K) > eps_k, K, 0))
+    patches = 0
+    for value in np.unique(label):
+        lab, count = ndimage.label(label == value)
+        sizes = np.bincount(lab.ravel())[1:]
+        patches += int(np.sum(sizes > 0.01 * label.size))
+    return degree + 1 + int(np.clip(np.ceil(np.sqrt(max(patches, 1))), 1, 12))
+
+
+def fit_surface(points, tol: float, *, grid_shape=None, mask=None, params=None, degree: int = 3,
+                n_initial: int | None = None, max_ctrl: int = 40000, statistic: str = "max",
+                smoothing: float = 1e-7) -> SurfaceFit:
+    """Least-squares bicubic (by default) B-spline surface of `points` refined by knot insertion.
+
+    points: (n, 3) scattered points, or a grid (rows, cols, 3) with optional `mask` (rows, cols) of valid
+        cells (a range image keeps its grid: the grid gives the parameterisation).
+    tol: tolerance in model units for the `statistic` ("max", or "p99" etc. for scans whose noise makes
+        a maximum meaningless) of the parametric residuals.
+    Refinement stops when the statistic is met, when no span can be split, or when the control net
+    would exceed `max_ctrl`; `SurfaceFit.stopped` says which, and `stats.met` is False then.
+    """
+    pts = np.asarray(points, float)
+    grid = None
+    if pts.ndim == 3:
+        grid = pts
+        mask = np.isfinite(grid).all(axis=2) if mask is None else (np.asarray(mask, bool) & np.isfinite(grid).all(axis=2))
+        if mask.sum() < (degree + 1) ** 2:
+            raise GeometryError("too few valid grid points to fit a surface")
+        ug, vg = grid_parameters(np.where(mask[..., None], grid, 0.0), mask) if params is None else params
+        full = bool(mask.all())
+        ii, jj = np.nonzero(mask)
+        u, v, data = ug[ii], vg[jj], grid[ii, jj]
+    else:
+        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < (degree + 1) ** 2:
+            raise GeometryError(f"need at least {(degree + 1) ** 2} points (n, 3) to fit a surface")
+        if not np.isfinite(pts).all():
+            raise GeometryError("points contain NaN or infinite coordinates")
+        full = False
+        u, v = (plane_parameters(pts)[:2] if params is None else params)
+        data = pts
+    n0 = n_initial or initial_net_size(grid, mask, degree, len(data))
+    ku = kv = uniform_knots(degree, n0)
+    prev, history = None, []
+    while True:
+        if full:
+            ctrl, Bu, Bv = solve_grid(ug, vg, grid, ku, kv, degree, degree, smoothing)
+            res = np.linalg.norm(_grid_eval(Bu, Bv, ctrl) - grid, axis=2).ravel()
+        else:
+            ctrl, A = solve_scattered(u, v, data, ku, kv, degree, degree, smoothing)
+            res = np.linalg.norm(A @ ctrl.reshape(-1, 3) - data, axis=1)
+        stats = fit_stats(res, tol, statistic)
+        if prev is not None and stats.value > prev[3].value:
+            ctrl = np.einsum("ia,abd,jb->ijd", refinement_matrix(prev[1], ku, degree), prev[0],
+                             refinement_matrix(prev[2], kv, degree))
+            res = _residuals(full, ug if full else u, vg if full else v, grid if full else data, ku, kv, degree, ctrl)
+            stats = fit_stats(res, tol, statistic)
+        history.append((ctrl.shape[0] * ctrl.shape[1], stats.value))
+        result = dict(degree_u=degree, degree_v=degree, knots_u=ku, knots_v=kv, ctrl=ctrl, stats=stats,
+                      residuals=res, history=tuple(history))
+        if stats.met:
+            return SurfaceFit(**result)
+        ru = res if not full else res.reshape(grid.shape[:2])
+        new_u = _spans_to_split(u if not full else ug, ru.max(axis=1) if full else res, ku, degree, tol,
+                                0.5 / max(len(np.unique(u if not full else ug)), 1))
+        new_v = _spans_to_split(v if not full else vg, ru.max(axis=0) if full else res, kv, degree, tol,
+                                0.5 / max(len(np.unique(v if not full else vg)), 1))
+        if len(new_u) + len(new_v) == 0:
+            return SurfaceFit(**result, stopped="no knot span can be split further: the data's own "
+                                                "sampling or noise limits the fit")
+        size = (ctrl.shape[0] + len(new_u)) * (ctrl.shape[1] + len(new_v))
+        if size > max_ctrl:
+            return SurfaceFit(**result, stopped=f"control-net limit {max_ctrl} reached")
+        prev = (ctrl, ku, kv, stats)
+        ku, kv = np.sort(np.r_[ku, new_u]), np.sort(np.r_[kv, new_v])
+
+
+def _grid_eval(Bu, Bv, ctrl):
+    """Surface points on the data grid (rows, cols, 3) from the design matrices: Bu C Bv'."""
+    T = np.stack([(Bu @ ctrl[:, :, k]) for k in range(3)], axis=2)              # (rows, nv, 3)
+    return np.stack([(Bv @ T[:, :, k].T).T for k in range(3)], axis=2)         # (rows, cols, 3)
+
+
+def _residuals(full, u, v, data, ku, kv, degree, ctrl):
+    Bu, Bv = design_matrix(u, ku, degree), design_matrix(v, kv, degree)
+    if full:
+        return np.linalg.norm(_grid_eval(Bu, Bv, ctrl) - data, axis=2).ravel()
+    A = _rowwise_kron(Bu, Bv, ctrl.shape[1])
+    return np.linalg.norm(A @ ctrl.reshape(-1, 3) - data, axis=1)
