@@ -22,8 +22,9 @@ def check_degree(degree, what: str = "degree") -> int:
 def check_knots(knots, degree: int, n: int, what: str = "knot vector") -> np.ndarray:
     """Validate a knot vector for `n` control points of degree `degree`; return it frozen.
 
-    Rules: length n + p + 1, finite, non-decreasing, no knot repeated more than p + 1 times, and a
-    non-empty domain [knots[p], knots[n]].
+    Rules: length n + p + 1, finite, non-decreasing, a non-empty domain [knots[p], knots[n]], no
+    knot repeated more than p + 1 times and none inside the domain more than p times (so curves
+    are continuous, which splitting and degree elevation rely on).
     """
     try:
         knots = np.asarray(knots, dtype=float)
@@ -44,12 +45,17 @@ def check_knots(knots, degree: int, n: int, what: str = "knot vector") -> np.nda
         i = int(np.argmax(steps < 0))
         raise GeometryError(f"{what} must be non-decreasing, but knot {i + 1} ({knots[i + 1]:g}) "
                             f"is below knot {i} ({knots[i]:g})")
-    _, counts = np.unique(knots, return_counts=True)
+    if not knots[degree] < knots[n]:
+        raise GeometryError(f"{what} has an empty domain [{knots[degree]:g}, {knots[n]:g}]")
+    values, counts = np.unique(knots, return_counts=True)
     if counts.max() > degree + 1:
         raise GeometryError(f"{what}: a knot is repeated {counts.max()} times, more than degree + 1 "
                             f"= {degree + 1}")
-    if not knots[degree] < knots[n]:
-        raise GeometryError(f"{what} has an empty domain [{knots[degree]:g}, {knots[n]:g}]")
+    inside = (values > knots[degree]) & (values < knots[n])
+    if np.any(counts[inside] > degree):
+        bad = values[inside][np.argmax(counts[inside] > degree)]
+        raise GeometryError(f"{what}: interior knot {bad:g} is repeated more than degree = {degree} "
+                            f"times, which would make the curve discontinuous")
     return frozen(knots)
 
 

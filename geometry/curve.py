@@ -188,7 +188,7 @@ class NurbsCurve:
         return self._with(self.degree, ka, pa), self._with(self.degree, kb, pb)
 
     def elevate(self, times: int = 1) -> "NurbsCurve":
-        """Raise the degree by `times` (Piegl & Tiller A5.9); the shape is unchanged."""
+        """Raise the degree by `times`; the shape is unchanged (see knots.elevate_degree)."""
         from .knots import elevate_degree
         times = V.check_degree(times, "times")
         return self._with(self.degree + times, *elevate_degree(self.knots, self.degree, self._pw, times))

@@ -280,7 +280,7 @@ class NurbsSurface:
         return halves[0], halves[1]
 
     def elevate(self, direction: str, times: int = 1) -> "NurbsSurface":
-        """Raise the degree in direction 'u' or 'v' by `times` (A5.10 via A5.9 per row)."""
+        """Raise the degree in direction 'u' or 'v' by `times`, all rows at once (see knots.elevate_degree)."""
         from .knots import elevate_degree
         times = V.check_degree(times, "times")
         return self._along(direction, lambda k, p, pw: (p + times, *elevate_degree(k, p, pw, times)))
