@@ -1,0 +1,101 @@
+"""`rgmc check FILE... [-D name=value]... [--format text|short|json]`: parse, resolve and type-check.
+
+Exit codes: 0 clean (warnings allowed), 1 errors, 2 usage (bad option, unreadable file). Diagnostics go
+to stdout in the chosen format, the summary line ("2 errors, 1 warning") to stderr. Whatever the input,
+no Python traceback: a crash inside the compiler is reported as an internal-error diagnostic (E0999).
+Imports only the front end (lark, no geometry kernels), so it starts fast.
+"""
+from __future__ import annotations
+
+import json
+import sys
+
+from rgm.compiler.diagnostics import Diagnostic, error, render, short, sort_and_dedupe, summary, to_dict
+
+INTERNAL = "E0999"
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("files", nargs="+", metavar="FILE", help=".rgm files to check")
+    parser.add_argument("-D", dest="defines", action="append", default=[], metavar="NAME=VALUE",
+                        help="override `param NAME` with VALUE (e.g. -D radius=30mm); repeatable")
+    parser.add_argument("--format", choices=("text", "short", "json"), default="text",
+                        help="long diagnostics with source lines (default), one line each, or JSON")
+
+
+def parse_defines(defines: list[str]) -> dict[str, str]:
+    """`["radius=30mm"]` -> {"radius": "30mm"}; raises ValueError with a usage message."""
+    params: dict[str, str] = {}
+    for item in defines:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            raise ValueError(f"-D expects NAME=VALUE, got `{item}`")
+        params[name.strip()] = value.strip()
+    return params
+
+
+def read_sources(files: list[str]) -> dict[str, str]:
+    """File name -> text; raises ValueError naming the file that cannot be read."""
+    sources = {}
+    for name in files:
+        try:
+            with open(name, encoding="utf-8") as fh:
+                sources[name] = fh.read()
+        except FileNotFoundError:
+            raise ValueError(f"no such file: {name}") from None
+        except IsADirectoryError:
+            raise ValueError(f"{name} is a directory, not a .rgm file") from None
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{name} is not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        except OSError as exc:
+            raise ValueError(f"cannot read {name}: {exc.strerror}") from None
+    return sources
+
+
+def internal_error(filename: str, exc: BaseException) -> Diagnostic:
+    """The last resort: a compiler crash reported as a diagnostic instead of a traceback."""
+    return error(INTERNAL, f"internal compiler error while checking {filename}: {type(exc).__name__}: {exc}", None,
+                 hint="this is a bug in rgmc, not in your file; please report it with the file attached")
+
+
+def check_source(text: str, filename: str, params: dict[str, str] | None) -> list[Diagnostic]:
+    """Every diagnostic of one file: syntax, then (if it parsed) names, types and values."""
+    from rgm.compiler.check import check
+    from rgm.compiler.parser import parse
+
+    try:
+        program, diagnostics = parse(text, filename)
+        diagnostics = list(diagnostics)
+        if program is not None:
+            diagnostics += check(program, params).diagnostics
+    except Exception as exc:  # noqa: BLE001 - the documented catch-all, reported as E0999
+        return [internal_error(filename, exc)]
+    return sort_and_dedupe(diagnostics)
+
+
+def emit(diagnostics: list[Diagnostic], sources: dict[str, str], fmt: str, out=None) -> None:
+    out = out or sys.stdout
+    if fmt == "json":
+        json.dump([to_dict(d) for d in diagnostics], out, indent=2)
+        out.write("\n")
+    elif fmt == "short":
+        for d in diagnostics:
+            out.write(short(d) + "\n")
+    else:
+        for d in diagnostics:
+            out.write(render(d, sources) + "\n\n")
+
+
+def run(args) -> int:
+    try:
+        params = parse_defines(args.defines)
+        sources = read_sources(args.files)
+    except ValueError as exc:
+        print(f"rgmc check: error: {exc}", file=sys.stderr)
+        return 2
+    diagnostics: list[Diagnostic] = []
+    for name, text in sources.items():
+        diagnostics += check_source(text, name, params)
+    emit(diagnostics, sources, args.format)
+    print(summary(diagnostics), file=sys.stderr)
+    return 1 if any(d.is_error for d in diagnostics) else 0
