@@ -1,0 +1,143 @@
+"""Shape classification from a recovered superellipsoid, and the splitting of multipart scans.
+
+Categories select the model builder (Solina & Bajcsy 1990; Raja & Jain 1992, "Recognizing geons from
+superquadrics fitted to range data"): ``sphere``, ``ellipsoid``, ``cylinder``, ``box``,
+``other_revolution`` and ``free_form``.
+
+The rules (each a soft membership in [0, 1], so that the winner comes with a confidence and a runner-up):
+
+- *good fit*  G = s((QUALITY_FREE_FORM - quality) / 0.006): the median radial distance is below ~2.5 % of
+  the mean semi-axis.  Every category but ``free_form`` is multiplied by G; ``free_form`` scores 1 - G.
+- *flat* exponent  (eps <= ~0.45: straight edges) f(eps) = s((0.45 - eps) / 0.06);
+  *round* exponent (eps >= ~0.7: an ellipse) r(eps) = s((eps - 0.7) / 0.06), s the logistic function.
+- *equal* semi-axes  e(a, b) = exp(-((max/min - 1) / 0.06)^2): within a few per cent.
+- box = G f(eps1) f(eps2);  cylinder = G f(eps1) r(eps2) e(a1, a2) (axis = local z);
+  sphere = G r(eps1) r(eps2) e(a1, a2) e(a2, a3) e(a1, a3);
+  ellipsoid = G r(eps1) r(eps2) (1 - e(a1, a2) e(a2, a3) e(a1, a3));
+  other_revolution = G r(eps2) e(a1, a2) (1 - f(eps1)) (1 - r(eps1))  (round section, curved profile).
+- confidence = winner's score / sum of scores.
+
+Splitting (`split_parts`): connected components of the radius graph (scipy cKDTree pairs within
+`gap` of each other, `scipy.sparse.csgraph.connected_components`), then, for a component whose
+superellipsoid fits badly, a recursive cut by the plane through the centroid across the principal axis
+(Leonardis, Jaklič & Solina 1997 split-and-merge in its simplest form), kept only when both halves fit
+clearly better.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rgm.fitters.superellipsoid import Superellipsoid, fit_superellipsoid
+
+__all__ = ["CATEGORIES", "Classification", "classify", "split_parts", "QUALITY_FREE_FORM"]
+
+CATEGORIES = ("sphere", "ellipsoid", "cylinder", "box", "other_revolution", "free_form")
+#: quality (median radial distance / mean semi-axis) above which a part counts as free form
+QUALITY_FREE_FORM = 0.025
+
+
+@dataclass(frozen=True)
+class Classification:
+    """category and runner_up are names from CATEGORIES; scores maps every category to its score."""
+
+    category: str
+    confidence: float
+    runner_up: str
+    scores: dict
+    superellipsoid: Superellipsoid
+
+
+def _s(x):
+    return 1.0 / (1.0 + np.exp(-np.clip(x, -50, 50)))
+
+
+def _equal(a, b):
+    return float(np.exp(-((max(a, b) / min(a, b) - 1.0) / 0.06) ** 2))
+
+
+def category_scores(se: Superellipsoid) -> dict:
+    """The membership score of each category (module docstring rules) for a recovered superellipsoid."""
+    a1, a2, a3 = se.size
+    e1, e2 = se.eps
+    good = float(_s((QUALITY_FREE_FORM - se.quality) / 0.006))
+    flat1, flat2 = _s((0.45 - e1) / 0.06), _s((0.45 - e2) / 0.06)
+    round1, round2 = _s((e1 - 0.7) / 0.06), _s((e2 - 0.7) / 0.06)
+    eq12, all_eq = _equal(a1, a2), _equal(a1, a2) * _equal(a2, a3) * _equal(a1, a3)
+    scores = {
+        "sphere": good * round1 * round2 * all_eq,
+        "ellipsoid": good * round1 * round2 * (1.0 - all_eq),
+        "cylinder": good * flat1 * round2 * eq12,
+        "box": good * flat1 * flat2,
+        "other_revolution": good * round2 * eq12 * (1.0 - flat1) * (1.0 - round1),
+        "free_form": 1.0 - good,
+    }
+    return {k: float(v) for k, v in scores.items()}
+
+
+def classify(points=None, *, superellipsoid: Superellipsoid | None = None) -> Classification:
+    """Classify a part from its points (n, 3) (a superellipsoid is recovered) or a given superellipsoid."""
+    se = superellipsoid if superellipsoid is not None else fit_superellipsoid(points)
+    scores = category_scores(se)
+    order = sorted(scores, key=scores.get, reverse=True)
+    total = sum(scores.values()) or 1.0
+    return Classification(order[0], scores[order[0]] / total, order[1], scores, se)
+
+
+def connected_components(points, gap: float) -> list[np.ndarray]:
+    """Index arrays of the connected components of the graph joining points closer than `gap`
+    (largest first)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components as _cc
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(points).query_pairs(gap, output_type="ndarray")
+    n = len(points)
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    count, labels = _cc(graph, directed=False)
+    parts = [np.flatnonzero(labels == k) for k in range(count)]
+    return sorted(parts, key=len, reverse=True)
+
+
+def spacing(points) -> float:
+    """Median nearest-neighbour distance of `points` (n, 3): the scan's sampling pitch."""
+    from scipy.spatial import cKDTree
+
+    sample = points[:: max(1, len(points) // 5000)]
+    d, _ = cKDTree(points).query(sample, k=2)
+    return float(np.median(d[:, 1]))
+
+
+def split_parts(points, *, gap: float | None = None, min_points: int = 200, max_depth: int = 2,
+                min_fraction: float = 0.02) -> list[np.ndarray]:
+    """Split a cloud (n, 3) into parts; returns index arrays into `points`, largest first.
+
+    gap : points closer than this are connected (default 6 x the median point spacing).
+    Components smaller than `min_fraction` of the cloud (or `min_points`) are dropped as debris.
+    Badly fitting components are cut recursively (module docstring) up to `max_depth` times.
+    """
+    points = np.asarray(points, float)
+    gap = 6.0 * spacing(points) if gap is None else gap
+    keep = max(min_points, int(min_fraction * len(points)))
+    parts = [p for p in connected_components(points, gap) if len(p) >= keep]
+    out = []
+    for part in parts:
+        out.extend(_split_badly_fitting(points, part, max_depth, min_points))
+    return sorted(out, key=len, reverse=True)
+
+
+def _split_badly_fitting(points, idx, depth, min_points):
+    se = fit_superellipsoid(points[idx])
+    if depth == 0 or se.quality <= QUALITY_FREE_FORM or len(idx) < 2 * min_points:
+        return [idx]
+    x = points[idx] - points[idx].mean(axis=0)
+    axis = np.linalg.eigh(np.cov(x.T))[1][:, -1]
+    side = x @ axis > 0
+    halves = [idx[side], idx[~side]]
+    if min(len(h) for h in halves) < min_points:
+        return [idx]
+    fits = [fit_superellipsoid(points[h]) for h in halves]
+    if max(f.quality for f in fits) > 0.6 * se.quality:
+        return [idx]
+    return [p for h in halves for p in _split_badly_fitting(points, h, depth - 1, min_points)]

@@ -1,0 +1,160 @@
+"""Surfaces of revolution from scans: axis, meridian profile, conic sections.
+
+1. Axis from the normals (Pottmann & Randrup 1998, "Rotational and helical surface approximation for
+   reverse engineering", Computing 60; Pottmann & Wallner, *Computational Line Geometry*, §6.3).  The
+   normal lines of a surface of revolution all meet its axis.  In Plücker coordinates a normal line is
+   (n, p x n) and a line (c, c̄) meets it iff  n . c̄ + (p x n) . c = 0;  minimising the sum of squares
+   of that bilinear form subject to |c| = 1 is a small eigenproblem (c̄ is eliminated in closed form).
+   Iteratively reweighted (Tukey biweight) against wrong normals at edges and outliers.  The pitch
+   c . c̄ is then set to zero (a rotation, not a helical motion), giving direction c and the axis point
+   c x c̄.
+2. Refinement by minimising the profile's spread: in the (r, z) coordinates of the axis, points of the
+   mantle (normal across the axis) must have one r per z-slab and points of the ends (normal along the
+   axis) one z per r-slab; the four axis parameters are adjusted (scipy least_squares, soft_l1) to shrink
+   the deviation from the slab means.
+3. The profile (r, z) is fitted by lines and circular arcs (`rgm.fitters.profile2d`).
+
+The part frame: origin on the axis at the profile's lowest z, the axis as the frame's y axis (the paper's
+pin, Figure 7: profile in the x-y plane, revolved about y), x along the first principal direction of the
+points across the axis.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from rgm.errors import GeometryError
+from rgm.fitters.profile2d import Profile, fit_conic_profile
+
+__all__ = ["axis_from_normals", "refine_axis", "profile_coordinates", "RevolutionFit", "fit_revolution"]
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def axis_from_normals(points, normals, *, iterations: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """Axis (point (3,), unit direction (3,)) of a surface of revolution from points and unit normals (n, 3)."""
+    points, normals = np.asarray(points, float), np.asarray(normals, float)
+    centre = points.mean(axis=0)
+    scale = np.sqrt(np.mean(np.sum((points - centre) ** 2, axis=1)))
+    p = (points - centre) / scale
+    rows = np.hstack([np.cross(p, normals), normals])    # (n, 6): residual = rows @ (c, c̄)
+    w = np.ones(len(p))
+    for _ in range(iterations):
+        m = (rows * w[:, None]).T @ rows
+        a, b, cc = m[:3, :3], m[:3, 3:], m[3:, 3:]
+        cinv = np.linalg.pinv(cc, rcond=1e-8)
+        reduced = a - b @ cinv @ b.T
+        c = np.linalg.eigh(reduced)[1][:, 0]
+        cbar = -cinv @ b.T @ c
+        res = rows @ np.r_[c, cbar]
+        s = 4.685 * 1.4826 * np.median(np.abs(res)) + 1e-12
+        w = np.clip(1 - (res / s) ** 2, 0, None) ** 2
+    cbar = cbar - (c @ cbar) * c                          # zero pitch: rotation, not helical motion
+    return centre + scale * np.cross(c, cbar), _unit(c)
+
+
+def profile_coordinates(points, axis_point, axis_dir) -> np.ndarray:
+    """(n, 2) (r, z): distance from the axis and position along it."""
+    d = points - axis_point
+    z = d @ axis_dir
+    r = np.linalg.norm(d - np.outer(z, axis_dir), axis=1)
+    return np.column_stack([r, z])
+
+
+def _perp_basis(d):
+    e = np.eye(3)[np.argmin(np.abs(d))]
+    u = _unit(np.cross(d, e))
+    return u, np.cross(d, u)
+
+
+def _slab_residuals(key, value, bins):
+    """value minus the mean value of its slab of `key` (bins equal slabs over key's range)."""
+    lo, hi = key.min(), key.max()
+    idx = np.minimum(((key - lo) / max(hi - lo, 1e-300) * bins).astype(int), bins - 1)
+    sums, counts = np.bincount(idx, value, bins), np.bincount(idx, None, bins)
+    return value - (sums / np.maximum(counts, 1))[idx]
+
+
+def refine_axis(points, normals, axis_point, axis_dir, *, bins: int = 60):
+    """Refine an axis by minimising the profile's spread (module docstring, step 2).
+    Returns (point, direction, robust sigma of the spread residuals)."""
+    axis_dir = _unit(axis_dir)
+    u, v = _perp_basis(axis_dir)
+    mantle = np.abs(normals @ axis_dir) < 0.5
+    ends = np.abs(normals @ axis_dir) > 0.9
+
+    def axis_of(x):
+        d = _unit(axis_dir + x[0] * u + x[1] * v)
+        return axis_point + x[2] * u + x[3] * v, d
+
+    def residuals(x):
+        p, d = axis_of(x)
+        rz = profile_coordinates(points, p, d)
+        parts = []
+        if mantle.sum() > 10:
+            parts.append(_slab_residuals(rz[mantle, 1], rz[mantle, 0], bins))
+        if ends.sum() > 10:
+            parts.append(_slab_residuals(rz[ends, 0], rz[ends, 1], bins))
+        return np.concatenate(parts)
+
+    r0 = residuals(np.zeros(4))
+    f_scale = max(1.4826 * np.median(np.abs(r0)), 1e-9)
+    sol = least_squares(residuals, np.zeros(4), loss="soft_l1", f_scale=f_scale, diff_step=1e-6,
+                        x_scale=np.r_[1e-2, 1e-2, f_scale * 10, f_scale * 10], max_nfev=60)
+    p, d = axis_of(sol.x)
+    sigma = 1.4826 * np.median(np.abs(sol.fun))
+    return p, d, float(sigma)
+
+
+@dataclass(frozen=True)
+class RevolutionFit:
+    """frame : (4, 4) part frame -> cloud frame (columns x, y = axis, z, origin).  profile : the meridian
+    profile in (r, z) = (part x, part y).  sigma : robust noise scale of the profile points."""
+
+    frame: np.ndarray
+    profile: Profile
+    sigma: float
+
+    def distance(self, points) -> np.ndarray:
+        """(n,) exact distance of cloud-frame points (n, 3) to the full surface of revolution."""
+        return self.profile.distance(profile_coordinates(points, self.frame[:3, 3], self.frame[:3, 1]))
+
+
+def fit_revolution(points, normals, *, tol: float, axis_hint=None, seed: int = 0) -> RevolutionFit:
+    """Fit a surface of revolution with a conic-section profile to points and unit normals (n, 3).
+
+    axis_hint : optional unit vector (e.g. a superellipsoid's symmetry axis) used if the normals are
+    degenerate (all normals meet many lines, as on a sphere).  tol : the requested tolerance; the
+    inlier threshold of the profile segmentation is max(3 sigma, tol / 4).
+    """
+    points, normals = np.asarray(points, float), np.asarray(normals, float)
+    if len(points) < 50:
+        raise GeometryError(f"a surface of revolution needs at least 50 points, got {len(points)}")
+    p, d = axis_from_normals(points, normals)
+    if axis_hint is not None and abs(d @ axis_hint) < 0.9:
+        d = _unit(np.asarray(axis_hint, float))
+        p = points.mean(axis=0)
+    p, d, sigma = refine_axis(points, normals, p, d)
+    rz = profile_coordinates(points, p, d)
+    thr = max(3.0 * sigma, tol / 4.0, 1e-9 * np.ptp(rz))
+    profile = fit_conic_profile(rz, thr=thr, seed=seed)
+    # part frame: origin at the lowest profile z on the axis, y = axis
+    z0 = float(profile.vertices[:, 1].min())
+    shifted = Profile(tuple(_shift(s, z0) for s in profile.segments))
+    x = _unit(np.cross(d, _perp_basis(d)[1]))
+    frame = np.eye(4)
+    frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = x, d, np.cross(x, d), p + z0 * d
+    return RevolutionFit(frame, shifted, sigma)
+
+
+def _shift(seg, z0):
+    off = np.array([0.0, z0])
+    from dataclasses import replace
+
+    return replace(seg, p0=seg.p0 - off, p1=seg.p1 - off,
+                   center=None if seg.center is None else seg.center - off,
+                   through=None if seg.through is None else seg.through - off)

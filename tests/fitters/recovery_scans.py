@@ -1,0 +1,109 @@
+"""Test helpers for model recovery: exact ray-cast range views of revolved polyline profiles (the paper's
+pin), superellipsoid clouds, YCB mesh views.  Everything from fixed seeds."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rgm.fitters.superellipsoid import Superellipsoid
+
+YCB = Path("/work/shared/data/ycb")
+PIN_RADIUS, PIN_LENGTH = 27.15, 129.88
+
+
+def pin_profile(radius=PIN_RADIUS, length=PIN_LENGTH, chamfer=0.0):
+    """(k, 2) (r, z) polyline of a pin along its axis, from the axis at z = 0 to the axis at z = length."""
+    if chamfer:
+        return np.array([[0, 0], [radius - chamfer, 0], [radius, chamfer], [radius, length - chamfer],
+                         [radius - chamfer, length], [0, length]], float)
+    return np.array([[0, 0], [radius, 0], [radius, length], [0, length]], float)
+
+
+def raycast_revolved(profile, origins, dirs):
+    """First hits (m,) t (inf = miss) of rays o + t d (m, 3) with the surface made by revolving the (r, z)
+    polyline `profile` about the y axis (z of the profile = world y)."""
+    o = origins[:, [0, 2, 1]] * [1, 1, 1]
+    d = dirs[:, [0, 2, 1]]
+    # in (x, w, y) with axis coordinate y: |x|^2 + |w|^2 = r^2
+    best = np.full(len(o), np.inf)
+    for (r0, z0), (r1, z1) in zip(profile[:-1], profile[1:]):
+        if abs(z1 - z0) < 1e-12:  # disc at z0
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (z0 - o[:, 2]) / d[:, 2]
+            hit = o + t[:, None] * d
+            r = np.hypot(hit[:, 0], hit[:, 1])
+            ok = (t > 0) & (r >= min(r0, r1) - 1e-12) & (r <= max(r0, r1))
+            best = np.where(ok & (t < best), t, best)
+            continue
+        beta = (r1 - r0) / (z1 - z0)
+        alpha = r0 - beta * z0                       # r = alpha + beta z
+        a = d[:, 0] ** 2 + d[:, 1] ** 2 - beta ** 2 * d[:, 2] ** 2
+        b = 2 * (o[:, 0] * d[:, 0] + o[:, 1] * d[:, 1] - beta * d[:, 2] * (alpha + beta * o[:, 2]))
+        c = o[:, 0] ** 2 + o[:, 1] ** 2 - (alpha + beta * o[:, 2]) ** 2
+        disc = b * b - 4 * a * c
+        sq = np.sqrt(np.maximum(disc, 0))
+        for sign in (-1, 1):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (-b + sign * sq) / (2 * a)
+            z = o[:, 2] + t * d[:, 2]
+            ok = (disc >= 0) & (t > 0) & (z >= min(z0, z1)) & (z <= max(z0, z1)) & (alpha + beta * z >= 0)
+            best = np.where(ok & (t < best), t, best)
+    return best
+
+
+def _view_rays(direction, centre, size, pitch):
+    d = np.asarray(direction, float)
+    d /= np.linalg.norm(d)
+    e = np.eye(3)[np.argmin(np.abs(d))]
+    u = np.cross(d, e)
+    u /= np.linalg.norm(u)
+    v = np.cross(d, u)
+    s = np.arange(-size, size, pitch)
+    gu, gv = np.meshgrid(s, s)
+    origins = centre - 3 * size * d + gu.reshape(-1, 1) * u + gv.reshape(-1, 1) * v
+    return origins, np.broadcast_to(d, origins.shape).copy()
+
+
+def scan_views(hit_fn, directions, centre, size, *, pitch, noise, outliers, seed, pose=np.eye(4)):
+    """Views (list of (k, 3) world points) of a surface given by hit_fn(origins, dirs) -> t, each with
+    Gaussian noise `noise` along the ray and a fraction `outliers` of points moved along the ray by
+    2-20 % of `size`; finally mapped by `pose` (4, 4)."""
+    rng = np.random.default_rng(seed)
+    views = []
+    for direction in directions:
+        o, d = _view_rays(direction, centre, size, pitch)
+        t = hit_fn(o, d)
+        ok = np.isfinite(t)
+        o, d, t = o[ok], d[ok], t[ok] + rng.normal(0, noise, ok.sum())
+        bad = rng.random(len(t)) < outliers
+        t[bad] += rng.choice([-1, 1], bad.sum()) * rng.uniform(0.02, 0.2, bad.sum()) * size
+        p = o + t[:, None] * d
+        views.append(p @ pose[:3, :3].T + pose[:3, 3])
+    return views
+
+
+def pin_views(*, chamfer=0.0, noise=0.03, outliers=0.05, seed=0, pose=np.eye(4), pitch=0.6):
+    """Several range views of the paper's pin (axis along y), three around the axis and two oblique views
+    that see the end caps."""
+    prof = pin_profile(chamfer=chamfer)
+    dirs = [(1, 0.35, 0), (-0.5, -0.35, 0.87), (-0.5, 0.3, -0.87), (0.3, 1.2, 0.2), (-0.2, -1.2, -0.3)]
+    return scan_views(lambda o, d: raycast_revolved(prof, o, d), dirs, np.array([0, PIN_LENGTH / 2, 0]),
+                      PIN_LENGTH / 2 + 10, pitch=pitch, noise=noise, outliers=outliers, seed=seed, pose=pose)
+
+
+def random_rotation(rng):
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+def superellipsoid_cloud(se: Superellipsoid, n, *, noise=0.01, outliers=0.05, rng):
+    """n points on `se` (directions uniform on the sphere, pushed radially to the surface), Gaussian noise
+    of `noise` x the mean semi-axis, and a fraction `outliers` replaced by uniform points in the box 20 %
+    larger than the cloud.  Returns (points, outlier mask)."""
+    pts = se.surface_points(rng.normal(size=(n, 3)))
+    pts += rng.normal(size=pts.shape) * noise * se.size.mean()
+    bad = rng.random(n) < outliers
+    lo, hi = pts.min(0), pts.max(0)
+    pts[bad] = rng.uniform(lo - 0.2 * (hi - lo), hi + 0.2 * (hi - lo), (bad.sum(), 3))
+    return pts, bad
