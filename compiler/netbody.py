@@ -1,0 +1,113 @@
+"""Reading the dense numeric form `net 40 x 40 [x y z, x y z, ...]` in one piece with numpy.
+
+The lexer hands the whole net over as a single token; this module checks and converts its body with
+a few vectorised passes over the characters (no Python loop per number), so a 1000 x 1000 control net
+of 30 MB costs about one `str.split` plus one float conversion:
+  1. a regex finds any character that is not a digit, sign, point, exponent, space or comma;
+  2. on the body's bytes, token starts (a non-separator after a separator) are counted per entry
+     (entries are separated by commas) with np.bincount: every entry must hold the same count `width`;
+  3. the numbers are converted by numpy (`np.array(body.replace(',', ' ').split(), float)`).
+Errors come back as `NetError(message, start, end, hint)` with offsets into the token text.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+_HEAD = re.compile(r"net\s+([0-9]+)(?:\s*x\s*([0-9]+))?\s*\[")
+_BAD_CHAR = re.compile(r"[^0-9eE+\-.,\s]")
+_TOKEN = re.compile(r"[^\s,]+")
+MAX_WIDTH = 4
+
+
+@dataclass
+class NetError(Exception):
+    message: str
+    start: int           # offsets into the token text, end exclusive
+    end: int
+    hint: str | None = None
+
+
+def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
+    """Parse the text of one NET token -> (shape, width, data of shape `shape + (width,)`, read-only).
+
+    Raises NetError for a zero dimension, a stray character, an empty or ragged body, an entry width
+    outside 1..4, a count of entries different from the declared shape, or a non-finite number.
+    """
+    head = _HEAD.match(text)
+    shape = tuple(int(g) for g in head.groups() if g is not None)
+    body_start, body = head.end(), text[head.end():-1]
+    if 0 in shape or max(shape) > 10**8:
+        raise NetError(f"a net needs between 1 and 10^8 rows and columns, not `{' x '.join(map(str, shape))}`",
+                       0, head.end() - 1)
+    bad = _BAD_CHAR.search(body)
+    if bad:
+        ch = bad.group()
+        at = body_start + bad.start()
+        if ch == "#":
+            raise NetError("a comment cannot go inside a net", at, at + 1,
+                           "put the comment on the line before the binding")
+        raise NetError(f"`{ch}` cannot appear in a net: only numbers separated by spaces, and commas between "
+                       "entries", at, at + 1, "write each entry as `x y z` and separate entries with `,`")
+    counts, entry_starts = _entry_counts(body)
+    if counts.size == 0 or not counts.any():
+        raise NetError("this net holds no numbers", 0, len(text), "write entries such as `[0 0 0, 1 0 0]`")
+    width = int(counts[0])
+    ragged = np.flatnonzero(counts != width)
+    if ragged.size:
+        k = int(ragged[0])
+        a, b = _entry_range(body, entry_starts, k)
+        raise NetError(f"entry {k + 1} of this net has {counts[k]} number{'s' * (counts[k] != 1)}, "
+                       f"but the first entry has {width}", body_start + a, body_start + b,
+                       "every entry has the same count: `x y z` for points, `x y z w` with weights")
+    if width > MAX_WIDTH:
+        raise NetError(f"entries of a net hold 1 to {MAX_WIDTH} numbers, these hold {width}",
+                       0, len(text), "is a `,` missing between entries?")
+    expected = int(np.prod(shape))
+    if counts.size != expected:
+        dims = " x ".join(map(str, shape))
+        raise NetError(f"`net {dims}` needs {expected} entries, found {counts.size}", 0, len(text),
+                       "one entry per control point, row after row, separated by `,`")
+    try:
+        data = np.array(body.replace(",", " ").split(), dtype=float)
+    except ValueError:
+        for m in _TOKEN.finditer(body):
+            try:
+                float(m.group())
+            except ValueError:
+                raise NetError(f"`{m.group()}` is not a number", body_start + m.start(),
+                               body_start + m.end()) from None
+        raise  # unreachable: numpy and float() accept the same spellings
+    if not np.isfinite(data).all():
+        m = next(m for m in _TOKEN.finditer(body) if not np.isfinite(float(m.group())))
+        raise NetError(f"`{m.group()}` is too large for a 64-bit float", body_start + m.start(),
+                       body_start + m.end())
+    data = data.reshape(shape + (width,))
+    data.flags.writeable = False
+    return shape, width, data
+
+
+def _entry_counts(body: str) -> tuple[np.ndarray, np.ndarray]:
+    """Numbers per entry (a trailing comma is allowed) and the byte offset where each entry begins."""
+    b = np.frombuffer(body.encode("ascii"), dtype=np.uint8)
+    comma = b == 44
+    number = ~((b <= 32) | comma)
+    starts = np.flatnonzero(number & ~np.concatenate(([False], number[:-1])))
+    entry = np.cumsum(comma)
+    counts = np.bincount(entry[starts], minlength=int(comma.sum()) + 1)
+    entry_starts = np.concatenate(([0], np.flatnonzero(comma) + 1))
+    if counts.size > 1 and counts[-1] == 0:
+        counts, entry_starts = counts[:-1], entry_starts[:-1]
+    return counts, entry_starts
+
+
+def _entry_range(body: str, entry_starts: np.ndarray, k: int) -> tuple[int, int]:
+    """Offsets of entry k with its surrounding spaces trimmed (at least one character)."""
+    a = int(entry_starts[k])
+    b = int(entry_starts[k + 1]) - 1 if k + 1 < entry_starts.size else len(body)
+    seg = body[a:b]
+    lead = len(seg) - len(seg.lstrip())
+    a2, b2 = a + lead, a + len(seg.rstrip())
+    return (a2, b2) if b2 > a2 else (a, a + 1)

@@ -1,0 +1,505 @@
+"""`.rgm` text -> typed AST (rgm.compiler.ast) plus syntax diagnostics; never raises.
+
+The grammar (grammar/rgm.lark) is parsed by lark's LALR(1) parser with the contextual lexer; the AST
+is built *during* parsing (lark's `transformer=` option), so no parse tree is ever materialised, and a
+dense control net is one token handed to numpy (rgm.compiler.netbody).
+
+Error recovery, so that one run reports several mistakes:
+  * a missing `;` at the end of a line is reported (E0005) and inserted, and parsing goes on;
+  * a stray character is reported (E0002) and skipped; `=` where `:=` belongs is replaced;
+  * an unterminated string (E0003) is closed at the end of its line;
+  * any other unexpected token (E0001) drops the statement: parsing restarts after the next `;`
+    (found by a scanner that skips strings, comments and nets), with the text before it blanked so
+    that every position stays where it was.
+Value problems found while building nodes (a bad net body E0004, a number too large E0006, a
+positional argument after a named one E0007, an unknown unit E0008) drop their statement too.
+
+Codes: E0001 unexpected token, E0002 unexpected character, E0003 unterminated string, E0004 bad net,
+E0005 missing `;`, E0006 number out of range, E0007 positional after named argument, E0008 unknown
+units, E0009 too many syntax errors (parsing stopped).
+"""
+from __future__ import annotations
+
+import math
+import re
+import threading
+from dataclasses import replace
+
+from lark import Lark, Token, Transformer, Tree
+from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
+
+from rgm.grammar import GRAMMAR_PATH
+
+from . import ast as A
+from .diagnostics import Diagnostic, Span, error
+from .netbody import NetError, read_net
+
+MAX_ERRORS = 40
+
+_LABELS = {
+    "SEMI": "`;`", "DEFINE": "`:=`", "NAME": "a name", "NUMBER": "a number", "STRING": "a string",
+    "NET": "a net", "LSQB": "`[`", "RSQB": "`]`", "LPAR": "`(`", "RPAR": "`)`", "COMMA": "`,`",
+    "COLON": "`:`", "DOT": "`.`", "PLUS": "`+`", "MINUS": "`-`", "STAR": "`*`", "SLASH": "`/`",
+    "UNITS": "`units`", "TOLERANCE": "`tolerance`", "PARAM": "`param`", "FN": "`fn`",
+    "EXPORT": "`export`", "ANNOTATION": "an annotation such as `@fit(...)`", "$END": "the end of the file",
+}
+_KEYWORDS = {"UNITS", "TOLERANCE", "PARAM", "FN", "EXPORT"}
+_OPERATORS = {"PLUS", "MINUS", "STAR", "SLASH"}
+_EXPR_START = {"NAME", "NUMBER", "STRING", "LSQB", "LPAR", "NET", "MINUS"}
+_STMT_START = {"UNITS", "TOLERANCE", "PARAM", "FN", "EXPORT", "ANNOTATION"}
+_UNIT_SUFFIXES = ("mm", "cm", "deg", "rad", "in", "m")
+# skips strings, comments and nets while looking for the `;` that ends a broken statement
+_SYNC = re.compile(r'"(?:[^"\\\n]|\\.)*"?|#[^\n]*|net\s+[0-9]+(?:\s*x\s*[0-9]+)?\s*\[[^\]]*\]|;')
+_NEWLINE_GAP = re.compile(r"\n[ \t\f\r]*\n")
+_ESCAPES = {"n": "\n", "t": "\t", '"': '"', "\\": "\\"}
+
+
+def parse(text: str | bytes, filename: str = "<input>") -> tuple[A.Program | None, list[Diagnostic]]:
+    """Parse `.rgm` source. Returns (program, diagnostics); the program is always built (None only if
+    the text could not be read at all), holding the statements that parsed. Bytes are decoded as
+    UTF-8 with replacement characters. Whatever the input, this function does not raise."""
+    if isinstance(text, (bytes, bytearray)):
+        text = bytes(text).decode("utf-8", errors="replace")
+    with _LOCK:
+        run = _Run(text, filename)
+        try:
+            run.parse()
+        except RecursionError:
+            run.diags.append(error("E0009", "this expression is nested too deeply to read", run.span(0, 1)))
+        return run.program(), run.diags
+
+
+# ------------------------------------------------------------------------------------------------ AST
+
+class _Builder(Transformer):
+    """Lark callbacks: children (named tokens and already-built nodes) -> AST nodes with spans.
+    One instance serves every parse (under _LOCK); `run` is the parse in progress."""
+
+    run: "_Run"
+
+    def __default__(self, data, children, meta):
+        """Helper rules (`_args`, `_items`, ...): a Tree that lark splices into its parent's children."""
+        return Tree(data, children)
+
+    # -- spans
+    def _span(self, first, last) -> Span:
+        a = first.span if not isinstance(first, Token) else None
+        b = last.span if not isinstance(last, Token) else None
+        return Span(self.run.filename,
+                    first.line if a is None else a.line, first.column if a is None else a.col,
+                    last.end_line if b is None else b.end_line, last.end_column if b is None else b.end_col,
+                    first.start_pos if a is None else a.start_pos, last.end_pos if b is None else b.end_pos)
+
+    # -- expressions
+    def number(self, c):
+        return self._number(c[0])
+
+    def _number(self, tok: Token) -> A.Number:
+        text, unit = str(tok), None
+        for suffix in _UNIT_SUFFIXES:
+            if text.endswith(suffix):
+                text, unit = text[: -len(suffix)], suffix
+                break
+        value = float(text)
+        span = self._span(tok, tok)
+        if not math.isfinite(value):
+            self.run.value_error(error("E0006", f"`{tok}` is too large for a 64-bit float", span,
+                                       "out of range", hint="the largest number is about 1.8e308"))
+            value = 0.0
+        return A.Number(value, unit, not any(ch in text for ch in ".eE"), span)
+
+    def string(self, c):
+        raw = str(c[0])[1:-1]
+        value = re.sub(r"\\(.)", lambda m: _ESCAPES.get(m.group(1), m.group(1)), raw) if "\\" in raw else raw
+        return A.String(value, self._span(c[0], c[0]))
+
+    def name(self, c):
+        return A.Name(str(c[0]), self._span(c[0], c[0]))
+
+    def call(self, c):
+        func = A.Name(str(c[0]), self._span(c[0], c[0]))
+        args, kwargs = [], []
+        for item in c[1:-1]:
+            if isinstance(item, tuple):
+                kwargs.append(item[:2])
+            elif kwargs:
+                self.run.value_error(error(
+                    "E0007", "a positional argument cannot follow a named one", item.span,
+                    "positional argument after `" + kwargs[-1][0] + ":`",
+                    hint="move it before the named arguments, or give it its name"))
+            else:
+                args.append(item)
+        return A.Call(func, tuple(args), tuple(kwargs), self._span(c[0], c[-1]))
+
+    def kwarg(self, c):
+        return (str(c[0]), c[1], self._span(c[0], c[1]))
+
+    def listexpr(self, c):
+        return A.ListExpr(tuple(c[1:-1]), self._span(c[0], c[-1]))
+
+    def binop(self, c):
+        return A.BinOp(str(c[1]), c[0], c[2], self._span(c[0], c[2]))
+
+    def neg(self, c):
+        return A.Neg(c[1], self._span(c[0], c[1]))
+
+    def member(self, c):
+        return A.Member(c[0], str(c[1]), self._span(c[0], c[1]))
+
+    def net(self, c):
+        tok = c[0]
+        span = self._span(tok, tok)
+        try:
+            shape, width, data = read_net(str(tok))
+        except NetError as e:
+            self.run.value_error(error("E0004", e.message, self.run.span(tok.start_pos + e.start, tok.start_pos + e.end),
+                                       hint=e.hint))
+            import numpy as np
+            shape, width, data = (1,), 1, np.zeros((1, 1))
+        return A.Net(shape, width, data, span)
+
+    # -- declarations
+    def type(self, c):
+        return A.TypeRef(str(c[0]), tuple(x for x in c[1:] if isinstance(x, A.TypeRef)), self._span(c[0], c[-1]))
+
+    def param(self, c):
+        return A.Param(str(c[0]), c[1], self._span(c[0], c[1]))
+
+    def annotation(self, c):
+        args = tuple(x[:2] for x in c[1:] if isinstance(x, tuple))
+        return A.Annotation(str(c[0])[1:], args, self._span(c[0], c[-1]))
+
+    # -- statements
+    def units(self, c):
+        unit = str(c[1])
+        if unit not in A.LENGTH_UNITS:
+            self.run.value_error(error("E0008", f"unknown units `{unit}`", self._span(c[1], c[1]),
+                                       "expected mm, cm, m or in", hint="write `units mm;`"))
+        return self.run.statement(A.Units(unit, span=self._span(c[0], c[-1])))
+
+    def tolerance(self, c):
+        return self.run.statement(A.Tolerance(self._number(c[1]), span=self._span(c[0], c[-1])))
+
+    def binding(self, c):
+        annotations = tuple(x for x in c if isinstance(x, A.Annotation))
+        rest = c[len(annotations):]
+        is_param = isinstance(rest[0], Token) and rest[0].type == "PARAM"
+        name = rest[1] if is_param else rest[0]
+        stmt = A.Binding(str(name), c[-2], is_param, annotations, span=self._span(c[0], c[-1]),
+                         name_span=self._span(name, name))
+        return self.run.statement(stmt)
+
+    def fndef(self, c):
+        annotations = tuple(x for x in c if isinstance(x, A.Annotation))
+        name = c[len(annotations) + 1]
+        params = tuple(x for x in c if isinstance(x, A.Param))
+        stmt = A.FnDef(str(name), params, c[-2], annotations, span=self._span(c[0], c[-1]),
+                       name_span=self._span(name, name))
+        return self.run.statement(stmt)
+
+    def export(self, c):
+        names = tuple(A.Name(str(t), self._span(t, t)) for t in c[1:-1])
+        return self.run.statement(A.Export(names, span=self._span(c[0], c[-1])))
+
+    def start(self, c):
+        return None
+
+
+_BUILDER = _Builder()
+_LOCK = threading.RLock()
+_PARSER: Lark | None = None
+
+
+def lark_parser() -> Lark:
+    """The shared LALR parser that builds the AST while parsing (for the benchmark and tests)."""
+    global _PARSER
+    if _PARSER is None:
+        _PARSER = Lark(GRAMMAR_PATH.read_text(encoding="utf-8"), parser="lalr", lexer="contextual",
+                       transformer=_BUILDER, maybe_placeholders=False, cache=False,
+                       lexer_callbacks={"COMMENT": _on_comment})
+    return _PARSER
+
+
+def _on_comment(tok: Token):
+    _BUILDER.run.comments.append(tok)
+    return tok
+
+
+# -------------------------------------------------------------------------------------------- a parse
+
+class _Run:
+    """The state of one call to `parse`: statements built so far, diagnostics, comments."""
+
+    def __init__(self, text: str, filename: str):
+        self.text, self.filename = text, filename
+        self.diags: list[Diagnostic] = []
+        self.statements: list = []
+        self.comments: list[Token] = []
+        self.broken: set[str] = set()
+        self.bad_positions: list[int] = []    # starts of value errors not yet charged to a statement
+        self.last_bad_char: tuple[int, int] | None = None   # (diag index, end offset) of the last E0002
+
+    # -- positions
+    def span(self, start: int, end: int) -> Span:
+        """Span of text[start:end] (offsets clipped to the text)."""
+        n = len(self.text)
+        start = max(0, min(start, n))
+        end = max(start, min(end, n))
+        line = self.text.count("\n", 0, start) + 1
+        col = start - (self.text.rfind("\n", 0, start) + 1) + 1
+        end_line = line + self.text.count("\n", start, end)
+        end_col = end - (self.text.rfind("\n", 0, end) + 1) + 1
+        return Span(self.filename, line, col, end_line, end_col, start, end)
+
+    # -- callbacks from the builder
+    def value_error(self, diag: Diagnostic):
+        self.diags.append(diag)
+        self.bad_positions.append(diag.span.start_pos)
+
+    def statement(self, stmt):
+        start = stmt.span.start_pos
+        if self.bad_positions and self.bad_positions[-1] >= start:
+            self.bad_positions = [p for p in self.bad_positions if p < start]
+            if isinstance(stmt, (A.Binding, A.FnDef)):
+                self.broken.add(stmt.name)
+        else:
+            self.statements.append(stmt)
+        return stmt
+
+    # -- the parse loop
+    def parse(self):
+        _BUILDER.run = self
+        parser = lark_parser()
+        start = 0
+        while True:
+            src = self.text if start == 0 else _blank(self.text, start)
+            try:
+                parser.parse(src, on_error=self.on_error)
+                return
+            except UnexpectedInput as e:
+                resume = self.recover(e)
+            if resume is None or len(self.diags) >= MAX_ERRORS:
+                if len(self.diags) >= MAX_ERRORS:
+                    self.diags.append(error("E0009", f"too many syntax errors; stopped after {MAX_ERRORS}",
+                                            self.span(len(self.text), len(self.text))))
+                return
+            start = resume
+
+    def on_error(self, e: UnexpectedInput) -> bool:
+        """lark's error hook: fix what can be fixed in place (return True to go on parsing)."""
+        if len(self.diags) >= MAX_ERRORS:
+            return False
+        if isinstance(e, UnexpectedCharacters):
+            return self.bad_character(e)
+        if isinstance(e, UnexpectedToken) and "SEMI" in e.expected and self.first_on_line(e.token):
+            at = _code_end(self.text, e.token.start_pos if e.token.type != "$END" else len(self.text))
+            if not self.explained(at):
+                self.diags.append(error("E0005", "missing `;` after this statement", self.span(at, at + 1),
+                                        "expected `;` here", hint="every statement ends with `;`"))
+            try:
+                ip = e.interactive_parser
+                ip.feed_token(Token("SEMI", ";", at, 0, 0, 0, 0, at + 1))
+                if e.token.type != "$END":
+                    ip.feed_token(e.token)
+                return True
+            except UnexpectedInput:
+                return False
+        return False
+
+    def explained(self, pos: int) -> bool:
+        """True when the last diagnostic is a lexical error on the line of `pos`: a token error right
+        after it is its consequence (`4 $ 5` is one mistake, not two)."""
+        if not self.diags or self.diags[-1].code not in ("E0002", "E0003"):
+            return False
+        return self.diags[-1].span.line == self.text.count("\n", 0, pos) + 1
+
+    def first_on_line(self, tok: Token) -> bool:
+        if tok.type == "$END":
+            return True
+        line_start = self.text.rfind("\n", 0, tok.start_pos) + 1
+        return not self.text[line_start:tok.start_pos].strip()
+
+    def bad_character(self, e: UnexpectedCharacters) -> bool:
+        pos = e.pos_in_stream
+        ch = self.text[pos] if pos < len(self.text) else ""
+        state = e.interactive_parser.lexer_thread.state
+        if ch == '"':
+            eol = self.text.find("\n", pos)
+            eol = len(self.text) if eol < 0 else eol
+            self.diags.append(error("E0003", "unterminated string", self.span(pos, eol), "this string is not closed",
+                                    hint='close it with `"` on the same line'))
+            state.line_ctr.feed(self.text[pos:eol])
+            return self.feed(e, "STRING", '""', pos)
+        if ch == "=" and "DEFINE" in (e.allowed or ()):
+            self.diags.append(error("E0002", "unexpected `=`", self.span(pos, pos + 1), "expected `:=`",
+                                    hint="bindings are written `name := value;`"))
+            state.line_ctr.feed(ch)
+            return self.feed(e, "DEFINE", ":=", pos)
+        if self.last_bad_char and self.last_bad_char[1] == pos:   # one diagnostic per run of junk
+            i = self.last_bad_char[0]
+            d = self.diags[i]
+            self.diags[i] = replace(d, message="unexpected characters",
+                                    span=self.span(d.span.start_pos, pos + 1))
+        else:
+            try:
+                allowed = set(e.interactive_parser.accepts()) - {"$END"} or e.allowed
+            except UnexpectedInput:
+                allowed = e.allowed
+            shown = ch if ch.isprintable() and not ch.isspace() else f"U+{ord(ch):04X}" if ch else "end of file"
+            hint = "comments start with `#`" if ch in "/;" else None
+            self.diags.append(error("E0002", f"unexpected character `{shown}`", self.span(pos, pos + 1),
+                                    "not part of the language" + (f"; expected {_expected(allowed)}" if allowed else ""),
+                                    hint=hint))
+        self.last_bad_char = (len(self.diags) - 1, pos + 1)
+        return True
+
+    def feed(self, e: UnexpectedInput, kind: str, value: str, pos: int) -> bool:
+        """Give the parser a stand-in token after a lexical error; False when it does not fit."""
+        try:
+            e.interactive_parser.feed_token(Token(kind, value, pos, 0, 0, 0, 0, pos))
+            return True
+        except UnexpectedInput:
+            return True  # the lexer already moved past; the next token reports what is wrong
+
+    def recover(self, e: UnexpectedInput) -> int | None:
+        """Report an error the hook could not fix, keep the statements completed before it, and
+        return the offset after the next `;` to restart from (None: give up)."""
+        if isinstance(e, UnexpectedToken):
+            self.unexpected_token(e)
+            try:   # a statement just completed (the error is on the next token): reduce it
+                e.interactive_parser.copy().feed_eof()
+            except (UnexpectedInput, AttributeError, AssertionError):
+                pass
+            if e.token.type == "$END":
+                return None
+            pos = e.token.start_pos
+        else:
+            pos = getattr(e, "pos_in_stream", None) or len(self.text)
+        for m in _SYNC.finditer(self.text, pos):
+            if m.group() == ";":
+                return m.end()
+        return None
+
+    def unexpected_token(self, e: UnexpectedToken):
+        tok = e.token
+        expected = set(e.expected or ())
+        if tok.type == "$END":
+            at = _code_end(self.text, len(self.text))
+            self.diags.append(error("E0001", "unexpected end of file", self.span(max(at - 1, 0), at),
+                                    f"expected {_expected(expected)} after this"))
+            return
+        if self.explained(tok.start_pos):
+            return
+        try:
+            expected = set(e.interactive_parser.accepts()) or expected
+        except UnexpectedInput:   # accepts() replays the parser; a failure only loses precision
+            pass
+        span = self.span(tok.start_pos, tok.end_pos)
+        before = self.text[max(0, tok.start_pos - 40):tok.start_pos]
+        if tok.type == "NUMBER" and re.search(r"(?<![A-Za-z0-9_])net\s*$", before):
+            self.diags.append(error("E0004", "malformed net", span, "expected `x` and a bracketed list of entries",
+                                    hint="write `net ROWS x COLS [x y z, x y z, ...]` with a closing `]`"))
+            return
+        hint = None
+        if tok.type in _KEYWORDS and "NAME" in expected:
+            hint = f"`{tok}` is a keyword; choose another name"
+        elif tok.type == "DEFINE" and (kw := re.search(r"(?<![A-Za-z0-9_])(units|tolerance|param|fn|export)\s*$", before)):
+            hint = f"`{kw.group(1)}` is a keyword and cannot be a binding name"
+        elif tok.type == "COLON" and "DEFINE" in expected:
+            hint = "bindings are written `name := value;`"
+        elif tok.type in ("NAME", "NUMBER", "STRING", "NET") and "COMMA" in expected:
+            hint = "is a `,` missing?"
+        self.diags.append(error("E0001", f"unexpected {_describe(tok)}", span, f"expected {_expected(expected)}",
+                                hint=hint))
+
+    # -- the result
+    def program(self) -> A.Program:
+        comments = sorted({t.start_pos: t for t in self.comments}.values(), key=lambda t: t.start_pos)
+        stmts, end_comments = _attach_comments(self.text, self.statements, comments)
+        return A.Program(tuple(stmts), tuple(end_comments),
+                         tuple(A.Comment(str(t).rstrip(), self.span(t.start_pos, t.end_pos)) for t in comments),
+                         frozenset(self.broken), self.span(0, len(self.text)))
+
+
+def _attach_comments(text: str, statements: list, comments: list[Token]):
+    """Give each statement its leading comments (before it, or inside it) and its trailing comment
+    (after its `;` on the same line); comments after the last statement are returned apart.
+    Also marks `blank_before` where a blank line precedes a statement (or its first comment)."""
+    out, ci, prev_end = [], 0, 0
+    for k, stmt in enumerate(statements):
+        sp = stmt.span
+        leading, first_pos = [], sp.start_pos
+        while ci < len(comments) and comments[ci].start_pos < sp.end_pos:
+            if not leading:
+                first_pos = min(first_pos, comments[ci].start_pos)
+            leading.append(str(comments[ci]).rstrip())
+            ci += 1
+        trailing = None
+        next_start = statements[k + 1].span.start_pos if k + 1 < len(statements) else len(text) + 1
+        if (ci < len(comments) and comments[ci].line == sp.end_line and comments[ci].start_pos < next_start
+                and "\n" not in text[sp.end_pos:comments[ci].start_pos]):
+            trailing = str(comments[ci]).rstrip()
+            ci += 1
+        blank = k > 0 and bool(_NEWLINE_GAP.search(text, prev_end, first_pos))
+        if leading or trailing or blank:
+            stmt = replace(stmt, leading=tuple(leading), trailing=trailing, blank_before=blank)
+        out.append(stmt)
+        prev_end = sp.end_pos
+    return out, [str(t).rstrip() for t in comments[ci:]]
+
+
+def _blank(text: str, start: int) -> str:
+    """`text` with everything before `start` turned into spaces (newlines kept, so positions hold)."""
+    return re.sub(r"[^\n]", " ", text[:start]) + text[start:]
+
+
+def _code_end(text: str, pos: int) -> int:
+    """Offset just after the last code character before `pos` (skipping blanks and comment lines)."""
+    for _ in range(10_000):
+        line_start = text.rfind("\n", 0, pos) + 1
+        seg = text[line_start:pos]
+        if "#" in seg and '"' not in seg:
+            seg = seg[: seg.index("#")]
+        seg = seg.rstrip()
+        if seg or line_start == 0:
+            return line_start + len(seg)
+        pos = line_start - 1
+    return pos
+
+
+def _describe(tok: Token) -> str:
+    if tok.type == "NAME":
+        return f"name `{tok}`"
+    if tok.type == "NUMBER":
+        return f"number `{tok}`"
+    if tok.type == "STRING":
+        return "string"
+    if tok.type == "NET":
+        return "net"
+    if tok.type == "ANNOTATION":
+        return f"annotation `{tok}`"
+    if tok.type in _KEYWORDS:
+        return f"keyword `{tok}`"
+    return f"`{tok}`"
+
+
+def _expected(terminals) -> str:
+    """Human labels for a set of lark terminal names: 'an expression', '`;` or an operator', ..."""
+    terms = set(terminals)
+    parts = []
+    if _STMT_START <= terms:
+        parts.append("a statement")
+        terms -= _STMT_START | {"NAME"}
+    if len(_EXPR_START & terms) >= 5:
+        parts.append("an expression")
+        terms -= _EXPR_START
+    if _OPERATORS <= terms:
+        terms -= _OPERATORS
+        parts.append("an operator")
+    order = ["SEMI", "DEFINE", "COMMA", "RPAR", "RSQB", "COLON", "LPAR", "LSQB", "DOT", "NAME", "NUMBER"]
+    labels = [_LABELS[t] for t in sorted(terms, key=lambda t: (order.index(t) if t in order else 99, t))
+              if t in _LABELS] + parts
+    if not labels:
+        return "something else"
+    labels = labels[:6]
+    return labels[0] if len(labels) == 1 else ", ".join(labels[:-1]) + " or " + labels[-1]
