@@ -238,6 +238,27 @@ def _ply_header(fh, name):
     return fmt, elements, info
 
 
+def _ragged_ascii(rows: list[str], el_name, name):
+    """Rows `k v1 .. vk` of an ascii list property -> (counts (n,), values (sum k,)), vectorised."""
+    text = "\n".join(rows)
+    b = np.frombuffer(text.encode("latin-1"), np.uint8)
+    space = (b == 32) | (b == 9) | (b == 10) | (b == 13)
+    start = ~space & np.r_[True, space[:-1]]                     # first byte of every token
+    line = np.cumsum(b == 10)
+    per_line = np.bincount(line[start], minlength=len(rows))
+    try:
+        flat = np.array(text.split(), dtype=np.int64)
+    except ValueError:
+        raise ScanError(f"{name}: element `{el_name}` has non-integer list entries") from None
+    starts = np.r_[0, np.cumsum(per_line)[:-1]]
+    counts = flat[np.minimum(starts, len(flat) - 1)] if len(flat) else np.zeros(len(rows), np.int64)
+    if len(per_line) != len(rows) or not np.array_equal(per_line, counts + 1):
+        raise ScanError(f"{name}: element `{el_name}`: a list's length does not match its count")
+    keep = np.ones(len(flat), bool)
+    keep[starts] = False
+    return counts, flat[keep]
+
+
 def _ply_ascii(body: bytes, elements, name):
     lines = body.decode("latin-1").splitlines()
     pos, out = 0, {}
@@ -253,8 +274,7 @@ def _ply_ascii(body: bytes, elements, name):
                 raise ScanError(f"{name}: element `{el_name}` rows do not have {len(props)} numbers") from None
             out[el_name] = {p[0]: arr[:, i] for i, p in enumerate(props)}
         elif len(props) == 1:
-            rows = [r.split() for r in chunk]
-            out[el_name] = {props[0][0]: [np.array(r[1:1 + int(r[0])], dtype=np.int64) for r in rows]}
+            out[el_name] = {props[0][0]: _ragged_ascii(chunk, el_name, name)}
         else:
             raise ScanError(f"{name}: element `{el_name}` mixes list and scalar properties (unsupported)")
     return out
@@ -279,16 +299,16 @@ def _ply_binary(body: bytes, elements, endian, name):
         dt = np.dtype([("n", ct), ("v", it, (first,))])
         fixed = np.frombuffer(body, dt, count, pos) if pos + dt.itemsize * count <= len(body) else None
         if fixed is not None and (fixed["n"] == first).all():  # all lists the same length (triangles)
-            out[el_name] = {prop: fixed["v"].astype(np.int64)}
+            out[el_name] = {prop: (np.full(count, first, np.int64), fixed["v"].astype(np.int64).ravel())}
             pos += dt.itemsize * count
             continue
-        lists = []
-        for _ in range(count):  # variable-length lists: rare, walked once
-            k = int(np.frombuffer(body, ct, 1, pos)[0])
+        counts, values = np.empty(count, np.int64), []
+        for i in range(count):  # variable-length lists: rare, walked once
+            k = counts[i] = int(np.frombuffer(body, ct, 1, pos)[0])
             pos += ct.itemsize
-            lists.append(np.frombuffer(body, it, k, pos).astype(np.int64))
+            values.append(np.frombuffer(body, it, k, pos).astype(np.int64))
             pos += it.itemsize * k
-        out[el_name] = {prop: lists}
+        out[el_name] = {prop: (counts, np.concatenate(values) if values else np.zeros(0, np.int64))}
     return out
 
 
@@ -316,22 +336,20 @@ def read_ply(path) -> Scan:
     faces = None
     face = data.get("face")
     if face:
-        lists = next(iter(face.values()))
-        lists = lists if isinstance(lists, list) else list(lists)
-        tris = [f for f in lists if len(f) == 3]
-        faces = np.array(tris, np.int64).reshape(-1, 3)
+        counts, values = next(iter(face.values()))
+        first = np.r_[0, np.cumsum(counts)[:-1]]
+        tri = first[counts == 3]
+        faces = values[tri[:, None] + np.arange(3)].reshape(-1, 3)  # polygons other than triangles: skipped
     grid = None
     rows, cols = int(info.get("num_rows", 0)), int(info.get("num_cols", 0))
     view_dir = origin = None
     if "range_grid" in data:
-        cells = next(iter(data["range_grid"].values()))
-        if len(cells) != rows * cols:
-            raise ScanError(f"{name}: grid size mismatch: range_grid has {len(cells)} cells, "
+        counts, values = next(iter(data["range_grid"].values()))
+        if len(counts) != rows * cols:
+            raise ScanError(f"{name}: grid size mismatch: range_grid has {len(counts)} cells, "
                             f"num_rows x num_cols = {rows} x {cols}")
-        if isinstance(cells, np.ndarray):
-            flat = cells[:, 0] if cells.shape[1] else np.full(len(cells), -1)
-        else:
-            flat = np.array([c[0] if len(c) else -1 for c in cells], np.int64)
+        first = np.r_[0, np.cumsum(counts)[:-1]]
+        flat = np.where(counts > 0, values[np.minimum(first, max(len(values) - 1, 0))] if len(values) else -1, -1)
         grid = flat.reshape(rows, cols).astype(np.int64)
         view_dir = np.array([0.0, 0.0, -1.0])  # Cyberware: scanner on +z (checked on the bunny)
     elif rows and cols:

@@ -40,12 +40,12 @@ def grooved_cylinder_sdf(p, radius=25.0, length=100.0, groove_at=15.0, groove_wi
 def _patch_height(x, y):
     """A free-form height field (mm) on [-50, 50]^2: two bumps, a dip and a gentle wave."""
     return (12 * np.exp(-((x - 15) ** 2 + (y - 10) ** 2) / 300) - 8 * np.exp(-((x + 20) ** 2 + (y + 15) ** 2) / 200)
-            + 3 * np.sin(x / 15) * np.cos(y / 20) + 6 * np.exp(-((x + 10) ** 2 + (y - 25) ** 2) / 120))
+            + 5 * np.sin(x / 9) * np.cos(y / 11) + 6 * np.exp(-((x + 10) ** 2 + (y - 25) ** 2) / 120))
 
 
 def freeform_patch_sdf(p):
     """SDF bound of a 10 mm thick slab whose top is the free-form height field `_patch_height`."""
-    top = (p[:, 2] - _patch_height(p[:, 0], p[:, 1])) / 1.6  # 1.6 >= sqrt(1 + max slope^2)
+    top = (p[:, 2] - _patch_height(p[:, 0], p[:, 1])) / 1.6  # 1.6 >= sqrt(1 + max slope^2) = 1.49
     sides = np.maximum(np.abs(p[:, 0]) - 50, np.abs(p[:, 1]) - 50)
     return np.maximum(np.maximum(top, sides), -p[:, 2] - 25)
 
