@@ -4,13 +4,13 @@ Back ends, fitters and users read these; see docs/architecture.md for the contra
 """
 from rgm.model.lazy import IntersectionCurve
 from rgm.model.objects import (
-    GEOMETRY, BSplineCurve, BSplineSurface, Circle, CircularArc, CompositeCurve, Curve, Extrusion, HPoint, Line,
+    GEOMETRY, BSplineCurve, ModelObject, BSplineSurface, Circle, CircularArc, CompositeCurve, Curve, Extrusion, HPoint, Line,
     Loop, Model, Plane, Point, Polyline, Revolution, RuledSurface, Shell, Surface, TrimmedFace, Vector,
     frozen_array,
 )
 
 __all__ = [
     "GEOMETRY", "BSplineCurve", "BSplineSurface", "Circle", "CircularArc", "CompositeCurve", "Curve", "Extrusion",
-    "HPoint", "IntersectionCurve", "Line", "Loop", "Model", "Plane", "Point", "Polyline", "Revolution",
+    "HPoint", "IntersectionCurve", "Line", "Loop", "Model", "ModelObject", "Plane", "Point", "Polyline", "Revolution",
     "RuledSurface", "Shell", "Surface", "TrimmedFace", "Vector", "frozen_array",
 ]
