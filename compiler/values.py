@@ -13,6 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import ast as A
+from .units import to_model
+
 
 @dataclass(frozen=True)
 class Knots:
@@ -142,3 +145,114 @@ def knot_vector_problems(knots: Knots, degree: int | None, n_ctrl: int | None, w
                                f"use {knots.helper}({degree}, ...)")
             out.append(prob)
     return [p for p in out if p is not None]
+
+
+@dataclass(frozen=True)
+class Point:
+    """A folded `pt`/`uv`/`vec`/`projPt`: `kind` is the builtin's name, `coords` in model units."""
+
+    kind: str
+    coords: tuple[float, ...]
+
+
+def _arg(call, i: int, name: str):
+    """The expression passed as the i-th positional or the `name` argument of a call, or None."""
+    return call.args[i] if len(call.args) > i else call.kwarg(name)
+
+
+def as_int(value) -> int | None:
+    """A folded number that is a whole number, as an int (degrees, counts)."""
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    return None
+
+
+class Folder:
+    """Constant folding of expressions into floats (model units, radians), strings, tuples (lists),
+    Points, Knots and Nets; anything not known before evaluation (geometry, fn parameters, a name in a
+    cycle) folds to None. Bindings are folded once, with `-D` overrides in place of param values."""
+
+    _POINTS = {"pt": ("x", "y", "z"), "uv": ("u", "v"), "vec": ("x", "y", "z"), "projPt": ("x", "y", "z", "w")}
+
+    def __init__(self, bindings: dict, overrides: dict, units: str, user_fns=()):
+        self.bindings, self.overrides, self.units = bindings, overrides, units
+        self.user_fns = set(user_fns)
+        self.memo: dict[str, object] = {}
+        self.busy: set[str] = set()
+
+    def binding(self, name: str):
+        if name in self.memo:
+            return self.memo[name]
+        if name in self.busy or name not in self.bindings:
+            return None
+        self.busy.add(name)
+        value = self.fold(self.overrides.get(name, self.bindings[name].expr))
+        self.busy.discard(name)
+        self.memo[name] = value
+        return value
+
+    def fold(self, expr, local: frozenset = frozenset()):
+        if isinstance(expr, A.Number):
+            return to_model(expr.value, expr.unit, self.units)
+        if isinstance(expr, A.String):
+            return expr.value
+        if isinstance(expr, A.Name):
+            return None if expr.id in local else self.binding(expr.id)
+        if isinstance(expr, A.ListExpr):
+            return tuple(self.fold(e, local) for e in expr.items)
+        if isinstance(expr, A.Net):
+            return expr
+        if isinstance(expr, A.Neg):
+            v = self.fold(expr.operand, local)
+            return -v if isinstance(v, float) else None
+        if isinstance(expr, A.BinOp):
+            a, b = self.fold(expr.left, local), self.fold(expr.right, local)
+            if not (isinstance(a, float) and isinstance(b, float)):
+                return None
+            if expr.op == "/":
+                return a / b if b != 0 else None
+            return {"+": a + b, "-": a - b, "*": a * b}[expr.op]
+        if isinstance(expr, A.Member):
+            obj = self.fold(expr.obj, local)
+            if isinstance(obj, Point):
+                if expr.attr == "length" and obj.kind == "vec":
+                    return float(np.linalg.norm(obj.coords))
+                names = self._POINTS[obj.kind]
+                attr = {"x": "u", "y": "v"}.get(expr.attr, expr.attr) if obj.kind == "uv" else expr.attr
+                return obj.coords[names.index(attr)] if attr in names else None
+            return None
+        if isinstance(expr, A.Call):
+            return self.call(expr, local)
+        return None
+
+    def call(self, call, local):
+        name = call.func.id
+        if name in self.user_fns:
+            return None
+        if name in self._POINTS:
+            coords = [self.fold(_arg(call, i, p), local) if _arg(call, i, p) is not None else None
+                      for i, p in enumerate(self._POINTS[name])]
+            return Point(name, tuple(coords)) if all(isinstance(c, float) for c in coords) else None
+        if name in ("clamped", "uniform", "knots"):
+            return self.knots(call, name, local)
+        return None
+
+    def knots(self, call, name, local) -> Knots | None:
+        def get(i, pname):
+            e = _arg(call, i, pname)
+            return None if e is None else self.fold(e, local)
+
+        if name == "knots":
+            values = get(0, "values")
+            ok = isinstance(values, tuple) and all(isinstance(v, float) for v in values)
+            return Knots(values, None, "knots") if ok else None
+        degree = as_int(get(0, "degree"))
+        if degree is None or degree < 1:
+            return None
+        if name == "uniform":
+            count = as_int(get(1, "count"))
+            return uniform_knots(degree, count) if count is not None and count > degree else None
+        interior = get(1, "interior") if _arg(call, 1, "interior") is not None else ()
+        if isinstance(interior, tuple) and all(isinstance(v, float) for v in interior):
+            return clamped_knots(degree, interior)
+        return None

@@ -1,0 +1,384 @@
+"""The type checker: `check(program, params) -> CheckResult`, every diagnostic in one run.
+
+After name resolution (`rgm.compiler.resolve`) each binding, `fn` body and annotation is typed
+against the builtin signature table (`rgm.compiler.builtins`). Mismatches say *why* a type was
+expected, Elm-style ("the 2nd argument of `revolve` (`axis`) expects a curve3, found a surface"),
+point at the offending argument and print the signature as a note. Calls that type-check then get
+value checks on their constant arguments (`rgm.compiler.valuecheck`: knot vectors, nets, weights).
+An expression with an error has type `unknown`, accepted everywhere, so one mistake gives one error.
+
+For the evaluator: `CheckResult.order` lists bindings with dependencies first; a call `f(...)` is a
+user fn when `f in result.fns`, else a builtin; a param's value is `result.expr_of(name)` (the `-D`
+override when there is one); `result.types` maps `id(expr)` and binding names to their Type.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from . import ast as A
+from . import types as T
+from .builtins import ANNOTATIONS, FRACTIONS, FUNCTIONS, Param, Signature
+from .diagnostics import Diagnostic, error, warning
+from .resolve import Resolution, resolve
+from .suggest import did_you_mean, suggest
+from .units import to_model
+from .valuecheck import Arg, ValueChecker
+from .values import Folder, ordinal
+
+
+@dataclass
+class CheckResult:
+    diagnostics: list[Diagnostic]
+    types: dict = field(default_factory=dict)          # id(expr) or binding name -> Type
+    order: list[str] = field(default_factory=list)     # bindings, dependencies first
+    fns: dict[str, A.FnDef] = field(default_factory=dict)
+    bindings: dict[str, A.Binding] = field(default_factory=dict)
+    overrides: dict[str, A.Expr] = field(default_factory=dict)   # -D values replacing param expressions
+    exports: tuple[str, ...] = ()
+    units: str = "mm"
+    tolerance: float | None = None                     # model units; None when the file gives none
+
+    @property
+    def ok(self) -> bool:
+        return not any(d.is_error for d in self.diagnostics)
+
+    def expr_of(self, name: str) -> A.Expr:
+        """The expression that defines binding `name`, after `-D` overrides."""
+        return self.overrides.get(name, self.bindings[name].expr)
+
+
+ARITHMETIC = ("arithmetic: point - point = vec, point ± vec = point, vec ± vec, number × vec, vec / number, "
+              "length × number = length, length / length = number, angle ± angle")
+_VERBS = {"+": "add {l} and {r}", "-": "subtract {r} from {l}", "*": "multiply {l} by {r}", "/": "divide {l} by {r}"}
+
+
+def _literal(num: A.Number, unit: str) -> str:
+    value = int(num.value) if num.value.is_integer() else num.value
+    return f"{value}{unit}"
+
+
+def _why(fname: str, pname: str, pos: int | None, annotation: bool = False) -> str:
+    callee = f"`@{fname}`" if annotation else f"`{fname}`"
+    if pos is not None:
+        return f"the {ordinal(pos + 1)} argument of {callee} (`{pname}`)"
+    return f"`{pname}` of {callee}"
+
+
+def _hint(expected: T.Type, actual: T.Type, expr, units: str) -> str | None:
+    """A concrete repair for a common mismatch, or None."""
+    if isinstance(expr, A.Number):
+        if expected == T.ANGLE and actual in (T.INT, T.NUM, T.LENGTH):
+            return f"did you mean `{_literal(expr, 'deg')}`?"
+        if expected == T.LENGTH and actual == T.ANGLE:
+            return f"did you mean `{_literal(expr, units)}`?"
+        if expected == T.INT and actual == T.NUM and expr.value.is_integer():
+            return f"write `{int(expr.value)}`: an integer has no decimal point"
+    if expected.kind == "list" and T.accepts(expected.elem, actual):
+        return "wrap it in a list: `[...]`"
+    if expected == T.KNOTS and actual.kind == "list":
+        return "make a knot vector with `knots([...])`, `clamped(degree, [...])` or `uniform(degree, count)`"
+    if expected == T.POINT3 and actual == T.POINT2:
+        return "`uv(u, v)` is a point of a surface's parameter space; a 3-D point is `pt(x, y, z)`"
+    if expected == T.CURVE3 and actual == T.CURVE2:
+        return "this curve lies in a surface's parameter space (it is built from `uv` points)"
+    if expected == T.VEC and actual == T.POINT3:
+        return "a direction is `vec(x, y, z)`; the difference `b - a` of two points is a vec"
+    return None
+
+
+class _Checker:
+    def __init__(self, program: A.Program, res: Resolution):
+        self.program, self.res = program, res
+        self.diags: list[Diagnostic] = []
+        self.types: dict = {}
+        self.busy: set[str] = set()
+        self.fn_results: dict[str, T.Type] = {}
+        self.fn_sigs: dict[str, Signature] = {}
+        self.folder = Folder(res.bindings, res.overrides, res.units, res.fns)
+        self.values = ValueChecker(self.folder, self.diags.append)
+
+    # ------------------------------------------------------------------------------------ statements
+    def run(self) -> None:
+        for stmt in self.program.statements:
+            if isinstance(stmt, A.Binding):
+                self.binding_type(stmt.name)
+                self.annotations(stmt.annotations)
+            elif isinstance(stmt, A.FnDef) and self.res.fns.get(stmt.name) is stmt:
+                self.fn_result(stmt.name)
+                self.annotations(stmt.annotations)
+            elif isinstance(stmt, A.Tolerance) and stmt is self.res.tolerance:
+                self.tolerance(stmt)
+            elif isinstance(stmt, A.Export):
+                self.export(stmt)
+
+    def binding_type(self, name: str) -> T.Type:
+        if name in self.types:
+            return self.types[name]
+        if name in self.busy or name in self.res.cyclic or name not in self.res.bindings:
+            return T.ANY
+        self.busy.add(name)
+        binding = self.res.bindings[name]
+        t = self.infer(binding.expr, {})
+        override = self.res.overrides.get(name)
+        if override is not None:
+            given = self.infer(override, {})
+            if not T.accepts(t, given):
+                self.diags.append(error(
+                    "E0116", f"`-D {name}`: param `{name}` is {T.describe(t)}, the value given is {T.describe(given)}",
+                    None, notes=[f"param `{name}` is declared on line {binding.span.line}"] if binding.span else [],
+                    hint=_hint(t, given, override.operand if isinstance(override, A.Neg) else override,
+                               self.res.units)))
+        self.busy.discard(name)
+        self.types[name] = t
+        return t
+
+    def tolerance(self, stmt: A.Tolerance) -> None:
+        num = stmt.value
+        if num.unit in ("deg", "rad"):
+            self.diags.append(error("E0204", "the tolerance is a length, found an angle", num.span, "an angle",
+                                    hint=f"did you mean `{_literal(num, self.res.units)}`?"))
+        elif num.value <= 0:
+            self.diags.append(error("E0203", f"the tolerance must be positive, found {num.value:g}", num.span,
+                                    "not positive", hint="a typical value is `tolerance 0.01;`"))
+
+    def export(self, stmt: A.Export) -> None:
+        for name in stmt.names:
+            if name.id in self.res.bindings:
+                t = self.binding_type(name.id)
+                if not T.accepts(T.EXPORTABLE, t):
+                    self.diags.append(error("E0310", f"cannot export `{name.id}`: it is {T.describe(t)}, not geometry",
+                                            name.span, f"{T.describe(t)}", [f"exportable: {T.EXPORTABLE}"]))
+
+    def annotations(self, annotations) -> None:
+        for ann in annotations:
+            builtin = ANNOTATIONS.get(ann.name)
+            if builtin is None:
+                near = suggest(ann.name, ANNOTATIONS)
+                self.diags.append(warning("W0102", f"unknown annotation `@{ann.name}` (kept, not checked)", ann.span,
+                                          "unknown", [f"known annotations: {', '.join('@' + a for a in ANNOTATIONS)}"],
+                                          f"did you mean `@{near[0]}`?" if near else None))
+                for _k, e in ann.args:
+                    self.infer(e, {})
+                continue
+            sig = builtin.overloads[0]
+            bound = self.bind(ann.name, sig, [], [(k, e, self.infer(e, {})) for k, e in ann.args], ann.span,
+                              builtin.notes(), annotation=True)
+            for key, args in bound.items():
+                param = sig.param(key)
+                expected = param.type if param else sig.extra
+                self.mismatch(ann.name, key, expected, args[0], builtin.notes(), annotation=True)
+                if (ann.name, key) in FRACTIONS:
+                    self.values.fraction(ann.name, key, args[0].expr)
+
+    # ------------------------------------------------------------------------------------ expressions
+    def infer(self, expr, env: dict[str, T.Type]) -> T.Type:
+        t = self._infer(expr, env)
+        self.types[id(expr)] = t
+        return t
+
+    def _infer(self, expr, env) -> T.Type:
+        if isinstance(expr, A.Number):
+            unit = expr.unit
+            if unit in ("deg", "rad"):
+                return T.ANGLE
+            return T.LENGTH if unit else (T.INT if expr.is_int else T.NUM)
+        if isinstance(expr, A.String):
+            return T.STR
+        if isinstance(expr, A.Net):
+            return T.NET
+        if isinstance(expr, A.Name):
+            if expr.id in env:
+                return env[expr.id]
+            return self.binding_type(expr.id)
+        if isinstance(expr, A.ListExpr):
+            t = T.list_of(T.ANY)
+            items = [self.infer(e, env) for e in expr.items]
+            if items:
+                elem = items[0]
+                for it in items[1:]:
+                    elem = T.join(elem, it)
+                t = T.list_of(elem)
+            return t
+        if isinstance(expr, A.Neg):
+            operand = self.infer(expr.operand, env)
+            t = T.unary("-", operand)
+            if t is None:
+                self.diags.append(error("E0306", f"cannot negate {T.describe(operand)}", expr.span,
+                                        f"this is {T.describe(operand)}", [ARITHMETIC]))
+            return t or T.ANY
+        if isinstance(expr, A.BinOp):
+            return self.binop(expr, env)
+        if isinstance(expr, A.Member):
+            return self.member(expr, env)
+        if isinstance(expr, A.Call):
+            return self.call(expr, env)
+        return T.ANY
+
+    def binop(self, expr: A.BinOp, env) -> T.Type:
+        left, right = self.infer(expr.left, env), self.infer(expr.right, env)
+        t = T.binary(expr.op, left, right)
+        if t is None:
+            hint = None
+            lit = expr.right if isinstance(expr.right, A.Number) else expr.left
+            if T.ANGLE in (left, right) and isinstance(lit, A.Number) and lit.unit is None:
+                hint = f"an angle needs `deg` or `rad`: did you mean `{_literal(lit, 'deg')}`?"
+            elif left == right == T.LENGTH and expr.op == "*":
+                hint = "there is no area type; scale a length by a plain number"
+            elif left == right == T.POINT3 and expr.op == "+":
+                hint = "move a point by a vec: `a + (b - a) / 2` is the midpoint"
+            verb = _VERBS[expr.op].format(l=T.describe(left), r=T.describe(right))
+            self.diags.append(error("E0306", f"cannot {verb}", expr.span, f"{left} {expr.op} {right}", [ARITHMETIC],
+                                    hint))
+            return T.ANY
+        if expr.op == "/":
+            self.values.division(expr, env)
+        return t
+
+    def member(self, expr: A.Member, env) -> T.Type:
+        obj = self.infer(expr.obj, env)
+        t = T.member(obj, expr.attr)
+        if t is None:
+            members = T.MEMBERS.get(obj.name, {}) if obj.kind == "prim" else {}
+            notes = [f"members of {obj}: {', '.join(members)}"] if members else [f"{T.describe(obj)} has no members"]
+            self.diags.append(error("E0307", f"{T.describe(obj)} has no member `{expr.attr}`", expr.span,
+                                    f"this is {T.describe(obj)}", notes, did_you_mean(expr.attr, members)))
+            return T.ANY
+        return t
+
+    # ------------------------------------------------------------------------------------ calls
+    def call(self, call: A.Call, env) -> T.Type:
+        args = [(e, self.infer(e, env)) for e in call.args]
+        kwargs = [(k, e, self.infer(e, env)) for k, e in call.kwargs]
+        name = call.func.id
+        if name in self.res.fns:
+            sig = self.fn_signature(name)
+            bound = self.bind(name, sig, args, kwargs, call.span, (str(sig),))
+            for pname, bargs in bound.items():
+                self.mismatch(name, pname, sig.param(pname).type, bargs[0], (str(sig),))
+            return self.fn_result(name)
+        builtin = FUNCTIONS.get(name)
+        if builtin is None:
+            return T.ANY   # reported by resolve
+        notes = builtin.notes()
+        clean = len(self.diags)
+        bound = self.bind(name, builtin.overloads[0], args, kwargs, call.span, notes)
+        chosen, best, best_bad = None, None, None
+        for sig in builtin.overloads:
+            bad = [(p, a) for p in sig.params for a in bound.get(p.name, ()) if not T.accepts(p.type, a.type)]
+            if not bad:
+                chosen = sig
+                break
+            if best_bad is None or len(bad) < len(best_bad):
+                best, best_bad = sig, bad
+        if chosen is None:
+            for param, arg in best_bad:
+                others = [s.param(param.name).type for s in builtin.overloads
+                          if all(T.accepts(p.type, a.type) for p in s.params if p.name != param.name
+                                 for a in bound.get(p.name, ()))]
+                expected = T.union(*others) if others else param.type
+                self.mismatch(name, param.name, expected, arg, notes)
+            chosen = best
+        result = self.result_type(chosen, bound)
+        if len(self.diags) == clean:   # value checks only on calls whose arguments fit
+            result = self.values.check(name, call, bound, frozenset(env)) or result
+        return result
+
+    def result_type(self, sig: Signature, bound: dict[str, list[Arg]]) -> T.Type:
+        if sig.result.kind != "var":
+            return sig.result
+        param = next(p for p in sig.params if p.type == sig.result)
+        args = bound.get(param.name)
+        return args[0].type if args else T.ANY
+
+    def bind(self, fname: str, sig: Signature, args, kwargs, span, notes, annotation=False) -> dict[str, list[Arg]]:
+        """Match positional and named arguments to parameters, reporting arity (E0302), unknown (E0304),
+        repeated (E0305) and missing (E0303) arguments. Returns parameter name -> its argument(s)."""
+        bound: dict[str, list[Arg]] = {}
+        params = sig.params
+        callee = f"`@{fname}`" if annotation else f"`{fname}`"
+        for i, (expr, t) in enumerate(args):
+            if params and params[min(i, len(params) - 1)].variadic:
+                bound.setdefault(params[-1].name, []).append(Arg(expr, t, i))
+            elif i < len(params):
+                bound[params[i].name] = [Arg(expr, t, i)]
+            else:
+                self.diags.append(error("E0302", f"{callee} takes {len(params)} argument{'s' * (len(params) != 1)} "
+                                        f"but {len(args)} were given", expr.span, f"unexpected {ordinal(i + 1)} argument",
+                                        notes))
+        for key, expr, t in kwargs:
+            param = sig.param(key)
+            if key in bound:
+                self.diags.append(error("E0305", f"`{key}` of {callee} is given twice", expr.span, "given again here",
+                                        notes))
+            elif param is None and sig.extra is None or param is not None and param.variadic:
+                names = [p.name for p in params if not p.variadic]
+                self.diags.append(error("E0304", f"{callee} has no parameter `{key}`", expr.span, f"unknown `{key}:`",
+                                        notes, did_you_mean(key, names)))
+            else:
+                bound[key] = [Arg(expr, t, None)]
+        for param in params:
+            if param.name in bound:
+                continue
+            if param.required:
+                self.diags.append(error("E0303", f"{callee} is missing its argument `{param.name}` ({param.type})",
+                                        span, f"`{param.name}` missing", notes))
+            elif param.variadic:
+                self.diags.append(error("E0303", f"{callee} needs at least one of `{param.name}` ({param.type})",
+                                        span, "nothing given", notes))
+        return bound
+
+    def mismatch(self, fname, pname, expected, arg: Arg, notes, annotation=False) -> None:
+        if expected is None or T.accepts(expected, arg.type):
+            return
+        label = (f"`{arg.expr.id}` is {T.describe(arg.type)}" if isinstance(arg.expr, A.Name)
+                 else f"this is {T.describe(arg.type)}")
+        self.diags.append(error("E0301", f"{_why(fname, pname, arg.pos, annotation)} expects {T.describe(expected)}, "
+                                f"found {T.describe(arg.type)}", arg.expr.span, label, notes,
+                                _hint(expected, arg.type, arg.expr, self.res.units)))
+
+    # ------------------------------------------------------------------------------------ user fns
+    def fn_signature(self, name: str) -> Signature:
+        if name not in self.fn_sigs:
+            fn = self.res.fns[name]
+            params = tuple(Param(p.name, self.type_ref(p.type)) for p in fn.params)
+            self.fn_sigs[name] = Signature(name, params, T.ANY)
+        return self.fn_sigs[name]
+
+    def fn_result(self, name: str) -> T.Type:
+        if name in self.fn_results:
+            return self.fn_results[name]
+        if name in self.res.cyclic or name in self.busy:
+            return T.ANY
+        self.busy.add(name)
+        sig = self.fn_signature(name)
+        t = self.infer(self.res.fns[name].body, {p.name: p.type for p in sig.params})
+        self.busy.discard(name)
+        self.fn_results[name] = t
+        self.fn_sigs[name] = Signature(name, sig.params, t)
+        return t
+
+    def type_ref(self, ref: A.TypeRef) -> T.Type:
+        if ref.name == "list" and len(ref.args) == 1:
+            inner = self.type_ref(ref.args[0])
+            return T.list_of(inner)
+        t = None if ref.args else (T.PRIMITIVES.get(ref.name) or T.ALIASES.get(ref.name))
+        if t is None:
+            known = list(T.PRIMITIVES) + list(T.ALIASES) + ["list"]
+            self.diags.append(error("E0117", f"unknown type `{ref}`", ref.span, "not a type",
+                                    [f"types: {', '.join(T.PRIMITIVES)}, list[T]"], did_you_mean(ref.name, known)))
+            return T.ANY
+        return t
+
+
+def check(program: A.Program, params: dict[str, str] | None = None) -> CheckResult:
+    """Resolve names, check types and constant values of `program`; `params` are `-D name=value` texts."""
+    res = resolve(program, params)
+    checker = _Checker(program, res)
+    checker.run()
+    tol = res.tolerance
+    tolerance = None
+    if tol is not None and tol.value.unit not in ("deg", "rad") and tol.value.value > 0:
+        tolerance = to_model(tol.value.value, tol.value.unit, res.units)
+    types = dict(checker.types)
+    return CheckResult(res.diagnostics + checker.diags, types, res.order, res.fns, res.bindings, res.overrides,
+                       res.exports, res.units, tolerance)
