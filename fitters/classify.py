@@ -18,7 +18,7 @@ The rules (each a soft membership in [0, 1], so that the winner comes with a con
 - confidence = winner's score / sum of scores.
 
 Splitting (`split_parts`): connected components of the radius graph (scipy cKDTree pairs within
-`gap` of each other, `scipy.sparse.csgraph.connected_components`), then, for a component whose
+`gap` of each other on a voxel grid, `scipy.sparse.csgraph.connected_components`), then, for a component whose
 superellipsoid fits badly, a recursive cut by the plane through the centroid across the principal axis
 (Leonardis, Jaklič & Solina 1997 split-and-merge in its simplest form), kept only when both halves fit
 clearly better.
@@ -86,16 +86,26 @@ def classify(points=None, *, superellipsoid: Superellipsoid | None = None) -> Cl
 
 
 def connected_components(points, gap: float) -> list[np.ndarray]:
-    """Index arrays of the connected components of the graph joining points closer than `gap`
-    (largest first)."""
+    """Index arrays of the connected components of the points (n, 3) joined when closer than about `gap`
+    (largest first).  Computed on a voxel grid of cell `gap`: occupied cells sharing a face, edge or
+    corner are connected (scipy.sparse.csgraph.connected_components), so points up to gap apart are
+    always joined and points more than 2 sqrt(3) gap apart never directly."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components as _cc
-    from scipy.spatial import cKDTree
 
-    pairs = cKDTree(points).query_pairs(gap, output_type="ndarray")
-    n = len(points)
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    count, labels = _cc(graph, directed=False)
+    cell = np.floor((points - points.min(axis=0)) / gap).astype(np.int64) + 1
+    dims = cell.max(axis=0) + 2
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    cells, inverse = np.unique(key, return_inverse=True)
+    offsets = np.array([(dx * dims[1] + dy) * dims[2] + dz for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+                        for dz in (-1, 0, 1) if (dx, dy, dz) > (0, 0, 0)])
+    nb = cells[:, None] + offsets[None, :]
+    pos = np.minimum(np.searchsorted(cells, nb), len(cells) - 1)
+    hit = cells[pos] == nb
+    rows = np.broadcast_to(np.arange(len(cells))[:, None], nb.shape)[hit]
+    m = len(cells)
+    count, labels = _cc(coo_matrix((np.ones(len(rows)), (rows, pos[hit])), shape=(m, m)), directed=False)
+    labels = labels[inverse.ravel()]
     parts = [np.flatnonzero(labels == k) for k in range(count)]
     return sorted(parts, key=len, reverse=True)
 
@@ -110,34 +120,34 @@ def spacing(points) -> float:
 
 
 def split_parts(points, *, gap: float | None = None, min_points: int = 200, max_depth: int = 2,
-                min_fraction: float = 0.02) -> list[np.ndarray]:
-    """Split a cloud (n, 3) into parts; returns index arrays into `points`, largest first.
+                min_fraction: float = 0.02) -> list[tuple[np.ndarray, Superellipsoid]]:
+    """Split a cloud (n, 3) into parts; returns (index array into `points`, its superellipsoid) pairs,
+    largest part first.
 
-    gap : points closer than this are connected (default 6 x the median point spacing).
+    gap : points closer than this are connected (default 4 x the median point spacing).
     Components smaller than `min_fraction` of the cloud (or `min_points`) are dropped as debris.
     Badly fitting components are cut recursively (module docstring) up to `max_depth` times.
     """
     points = np.asarray(points, float)
-    gap = 6.0 * spacing(points) if gap is None else gap
+    gap = 4.0 * spacing(points) if gap is None else gap
     keep = max(min_points, int(min_fraction * len(points)))
     parts = [p for p in connected_components(points, gap) if len(p) >= keep]
     out = []
     for part in parts:
-        out.extend(_split_badly_fitting(points, part, max_depth, min_points))
-    return sorted(out, key=len, reverse=True)
+        out.extend(_split_badly_fitting(points, part, fit_superellipsoid(points[part]), max_depth, min_points))
+    return sorted(out, key=lambda pair: len(pair[0]), reverse=True)
 
 
-def _split_badly_fitting(points, idx, depth, min_points):
-    se = fit_superellipsoid(points[idx])
+def _split_badly_fitting(points, idx, se, depth, min_points):
     if depth == 0 or se.quality <= QUALITY_FREE_FORM or len(idx) < 2 * min_points:
-        return [idx]
+        return [(idx, se)]
     x = points[idx] - points[idx].mean(axis=0)
     axis = np.linalg.eigh(np.cov(x.T))[1][:, -1]
     side = x @ axis > 0
     halves = [idx[side], idx[~side]]
     if min(len(h) for h in halves) < min_points:
-        return [idx]
+        return [(idx, se)]
     fits = [fit_superellipsoid(points[h]) for h in halves]
     if max(f.quality for f in fits) > 0.6 * se.quality:
-        return [idx]
-    return [p for h in halves for p in _split_badly_fitting(points, h, depth - 1, min_points)]
+        return [(idx, se)]
+    return [pair for h, f in zip(halves, fits) for pair in _split_badly_fitting(points, h, f, depth - 1, min_points)]

@@ -139,13 +139,15 @@ def fit_revolution(points, normals, *, tol: float, axis_hint=None, seed: int = 0
         d = _unit(np.asarray(axis_hint, float))
         p = points.mean(axis=0)
     p, d, sigma = refine_axis(points, normals, p, d)
+    d = d if d[np.argmax(np.abs(d))] > 0 else -d         # canonical: the axis' largest component positive
     rz = profile_coordinates(points, p, d)
     thr = max(3.0 * sigma, tol / 4.0, 1e-9 * np.ptp(rz))
     profile = fit_conic_profile(rz, thr=thr, seed=seed)
     # part frame: origin at the lowest profile z on the axis, y = axis
     z0 = float(profile.vertices[:, 1].min())
     shifted = Profile(tuple(_shift(s, z0) for s in profile.segments))
-    x = _unit(np.cross(d, _perp_basis(d)[1]))
+    e = np.eye(3)[0] if abs(d[0]) < 0.9 else np.eye(3)[2]  # frame x: world x (or z) made normal to the axis
+    x = _unit(e - (e @ d) * d)
     frame = np.eye(4)
     frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = x, d, np.cross(x, d), p + z0 * d
     return RevolutionFit(frame, shifted, sigma)
@@ -158,3 +160,28 @@ def _shift(seg, z0):
     return replace(seg, p0=seg.p0 - off, p1=seg.p1 - off,
                    center=None if seg.center is None else seg.center - off,
                    through=None if seg.through is None else seg.through - off)
+
+
+def sample_revolution(profile: Profile, frame, spacing: float) -> np.ndarray:
+    """(m, 3) points on the surface of revolution of `profile` in the part frame `frame` (4, 4) (profile
+    r along frame x, z along frame y), about `spacing` apart (for coverage)."""
+    rz = []
+    for seg in profile.segments:
+        if seg.kind == "line":
+            k = max(2, int(np.linalg.norm(seg.p1 - seg.p0) / spacing) + 1)
+            rz.append(seg.p0 + np.linspace(0, 1, k)[:, None] * (seg.p1 - seg.p0))
+        else:
+            a0, a1, am = (np.arctan2(*(p - seg.center)[::-1]) for p in (seg.p0, seg.p1, seg.through))
+            span = (a1 - a0) % (2 * np.pi)
+            if (am - a0) % (2 * np.pi) > span:
+                span -= 2 * np.pi
+            k = max(3, int(abs(span) * seg.radius / spacing) + 1)
+            ang = a0 + np.linspace(0, 1, k) * span
+            rz.append(seg.center + seg.radius * np.column_stack([np.cos(ang), np.sin(ang)]))
+    rz = np.vstack(rz)
+    counts = np.maximum(8, (2 * np.pi * rz[:, 0] / spacing).astype(int))
+    idx = np.repeat(np.arange(len(rz)), counts)
+    phi = 2 * np.pi * (np.arange(len(idx)) - np.repeat(np.cumsum(counts) - counts, counts)) / counts[idx]
+    r, z = rz[idx, 0], rz[idx, 1]
+    local = np.column_stack([r * np.cos(phi), z, -r * np.sin(phi)])
+    return local @ frame[:3, :3].T + frame[:3, 3]

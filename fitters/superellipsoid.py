@@ -27,6 +27,7 @@ mean semi-axis: 0.01 means the typical point lies within 1 % of the part's size 
 """
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,13 +170,16 @@ def _normalise(points):
 
 
 def _starts(x):
-    """Start poses from the moments: PCA axes, each in turn as the local z axis; semi-axes from the 2-98 %
-    extent along each axis."""
+    """Start poses from the moments: PCA axes, each in turn as the local z axis, and each also turned by
+    45 deg about that z axis (PCA axes are arbitrary where two moments are nearly equal); semi-axes from
+    the 2-98 % extent along each axis."""
     med = np.median(x, axis=0)
     _, vecs = np.linalg.eigh(np.cov((x - med).T))
+    c = np.sqrt(0.5)
+    spins = (np.eye(3), np.array([[c, -c, 0.0], [c, c, 0.0], [0.0, 0.0, 1.0]]))
     out = []
-    for perm in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):
-        r0 = vecs[:, perm]
+    for perm, spin in itertools.product(((0, 1, 2), (1, 2, 0), (2, 0, 1)), spins):
+        r0 = vecs[:, perm] @ spin
         if np.linalg.det(r0) < 0:
             r0 = r0 * np.array([1.0, 1.0, -1.0])
         proj = (x - med) @ r0
@@ -190,11 +194,11 @@ _LOWER = np.r_[[1e-3] * 3, [EPS_BOUNDS[0]] * 2, [-np.pi] * 3, [-np.inf] * 3]
 _UPPER = np.r_[[np.inf] * 3, [EPS_BOUNDS[1]] * 2, [np.pi] * 3, [np.inf] * 3]
 
 
-def _solve(x, r0, theta0, loss, f_scale, max_nfev):
+def _solve(x, r0, theta0, loss, f_scale, max_nfev, tr_solver="exact"):
     sol = least_squares(lambda th: _residuals(th, x, r0, False), theta0,
                         jac=lambda th: _residuals(th, x, r0, True)[1],
                         bounds=(_LOWER, _UPPER), loss=loss, f_scale=f_scale, max_nfev=max_nfev,
-                        x_scale=1.0, method="trf")
+                        x_scale=1.0, method="trf", tr_solver=tr_solver)
     return sol
 
 
@@ -204,13 +208,14 @@ def _median_distance(theta, r0, x):
     return float(np.median(se.radial_distance(x)))
 
 
-def _refine(x, r0, theta):
-    """Refine twice, re-estimating the robust scale from the current residuals: soft_l1 first, then the
-    redescending Cauchy loss, under which points inside the part (whose Solina residual is bounded by
-    -sqrt(a1 a2 a3)) no longer pull the surface inwards.  Returns (median radial distance, r0, theta)."""
-    for loss in ("soft_l1", "cauchy"):
+def _refine(x, r0, theta, losses):
+    """Refine with each loss in turn, re-estimating the robust scale from the current residuals: soft_l1,
+    then the redescending Cauchy loss, under which points inside the part (whose Solina residual is
+    bounded by -sqrt(a1 a2 a3)) no longer pull the surface inwards.
+    Returns (median radial distance, r0, theta)."""
+    for loss in losses:
         f_scale = max(1.4826 * np.median(np.abs(_residuals(theta, x, r0, False))), 1e-4)
-        theta = _solve(x, r0, theta, loss, f_scale, 40).x
+        theta = _solve(x, r0, theta, loss, f_scale, 30).x
     return _median_distance(theta, r0, x), r0, theta
 
 
@@ -226,7 +231,7 @@ def _finish(theta, r0, c, scale, points_n):
     return Superellipsoid(theta[:3] * scale, theta[3:5].copy(), rot, theta[8:] * scale + c, quality, inliers)
 
 
-def fit_superellipsoid(points, *, max_points: int = 1500, seed: int = 0,
+def fit_superellipsoid(points, *, max_points: int = 1000, seed: int = 0,
                        eps_starts=((1.0, 1.0), (0.3, 0.3)), refine_best: int = 2) -> Superellipsoid:
     """Recover a superellipsoid from `points` (n, 3), n >= 20, robust to a few per cent outliers.
 
@@ -242,18 +247,20 @@ def fit_superellipsoid(points, *, max_points: int = 1500, seed: int = 0,
     xn = (points - c) / scale
     rng = np.random.default_rng(seed)
     sub = xn[rng.choice(len(xn), max_points, replace=False)] if len(xn) > max_points else xn
-    coarse = sub[: max(60, len(sub) // 4)]
+    coarse = sub[: max(60, len(sub) // 6)]
     candidates = []
     for r0, size, centre in _starts(sub):
         for e in eps_starts:
             theta0 = np.r_[size, e, 0.0, 0.0, 0.0, centre]
             f_scale = max(1.4826 * np.median(np.abs(_residuals(theta0, coarse, r0, False))), 1e-3)
-            th = _solve(coarse, r0, theta0, "soft_l1", f_scale, 15).x
+            th = _solve(coarse, r0, theta0, "soft_l1", f_scale, 12).x
             # robust costs differ in f_scale: compare the starts by median radial distance
             candidates.append((_median_distance(th, r0, coarse), r0, th))
     candidates.sort(key=lambda cand: cand[0])
-    finals = [_refine(sub, r0, th) for _, r0, th in candidates[:refine_best]]
+    half = sub[: max(60, len(sub) // 2)]
+    finals = [_refine(half, r0, th, ("soft_l1",)) for _, r0, th in candidates[:refine_best]]
     _, r0, theta = min(finals, key=lambda cand: cand[0])
+    _, r0, theta = _refine(sub, r0, theta, ("soft_l1", "cauchy"))
     return _finish(theta, r0, c, scale, xn)
 
 
