@@ -32,10 +32,10 @@ DEFAULT_TOLERANCE = 0.01
 
 
 class _Failure(Exception):
-    """Evaluation of one binding failed; carries the diagnostic."""
+    """Evaluation of one binding failed; carries the diagnostic (None: a dependency already failed)."""
 
-    def __init__(self, diagnostic: Diagnostic):
-        super().__init__(diagnostic.message)
+    def __init__(self, diagnostic: Diagnostic | None):
+        super().__init__(diagnostic.message if diagnostic else "a dependency failed")
         self.diagnostic = diagnostic
 
 
@@ -264,7 +264,7 @@ class Evaluator:
             constants = {"none": None, "true": True, "false": False}
             if expr.id in constants:
                 return constants[expr.id]
-            raise _Failure(error("E0512", f"`{expr.id}` has no value (its binding failed)", expr.span))
+            raise _Failure(None)  # its binding failed and was reported
         if isinstance(expr, A.ListExpr):
             return [self.eval(e, scope) for e in expr.items]
         if isinstance(expr, A.Net):
@@ -321,45 +321,39 @@ class Evaluator:
         return bound
 
 
-def evaluate(program: A.Program, params: dict[str, str] | None = None, resolution=None,
+def evaluate(program: A.Program, checked=None, params: dict[str, str] | None = None,
              source: str | None = None) -> tuple[M.Model, list[Diagnostic]]:
     """Evaluate a checked program into a Model; returns (model, diagnostics of evaluation).
 
-    `params` are `-D` overrides as text (`{"radius": "30"}`, model units when unitless); `resolution`
-    is the resolver's result if the caller has it. Bindings whose evaluation fails are left out of
-    the model and reported; bindings that depend on them are skipped silently.
+    `checked` is `rgm.compiler.check.check(program, params)`'s result (computed here when None);
+    `params` are `-D` overrides as text (`{"radius": "30"}`, model units when unitless). A binding
+    whose evaluation fails is left out of the model and reported once; bindings that use it are
+    skipped without further noise.
     """
-    if resolution is None:
-        from rgm.compiler.resolve import resolve
+    if checked is None:
+        from rgm.compiler.check import check
 
-        resolution = resolve(program, params)
-    units = resolution.units
-    tolerance = DEFAULT_TOLERANCE
-    if resolution.tolerance is not None:
-        t = resolution.tolerance.value
-        tolerance = to_model(t.value, t.unit, units)
-    ev = Evaluator(units, tolerance, resolution.fns)
+        checked = check(program, params)
+    units = checked.units
+    tolerance = DEFAULT_TOLERANCE if checked.tolerance is None else float(checked.tolerance)
+    ev = Evaluator(units, tolerance, checked.fns)
     diagnostics: list[Diagnostic] = []
-    failed: set[str] = set()
-    for name in resolution.order:
-        binding = resolution.bindings.get(name)
-        if binding is None or name in resolution.cyclic:
+    for name in checked.order:
+        binding = checked.bindings.get(name)
+        if binding is None:
             continue
-        if any(dep in failed for dep, _ in resolution.deps.get(name, ())):
-            failed.add(name)
-            continue
-        expr = resolution.overrides.get(name, binding.expr) if binding.is_param else binding.expr
+        expr = checked.overrides.get(name, binding.expr) if binding.is_param else binding.expr
         try:
             value = ev.eval(expr, ev.env)
         except _Failure as exc:
-            diagnostics.append(exc.diagnostic)
-            failed.add(name)
+            if exc.diagnostic is not None:
+                diagnostics.append(exc.diagnostic)
             continue
         if isinstance(value, M.ModelObject):
             value = value.named(name)
         ev.env[name] = value
-    params_out = {n: ev.env[n] for n, b in resolution.bindings.items() if b.is_param and n in ev.env}
-    exports = tuple(n for n in resolution.exports if n in ev.env)
+    params_out = {n: ev.env[n] for n, b in checked.bindings.items() if b.is_param and n in ev.env}
+    exports = tuple(n for n in checked.exports if n in ev.env)
     model = M.Model(units, tolerance, dict(ev.env), exports, params_out,
                     source or (program.span.file if program.span else None))
     return model, diagnostics

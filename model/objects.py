@@ -659,8 +659,9 @@ GEOMETRY = (Curve, Surface, TrimmedFace, Shell)
 class Model:
     """An evaluated `.rgm` file: every binding by name, in `units`, with the model `tolerance`.
 
-    `params` are the final values of the `param` bindings (after -D overrides), as plain floats in
-    model units (radians for angles); `source` is the file path the model came from.
+    `params` are the final values of the `param` bindings (after -D overrides), as plain numbers in
+    model units (radians for angles); `source` is the file path the model came from; `diagnostics`
+    the warnings found while compiling it.
     """
 
     units: str
@@ -669,6 +670,7 @@ class Model:
     exports: tuple = ()
     params: dict = field(default_factory=dict)
     source: str | None = None
+    diagnostics: tuple = ()
 
     def __post_init__(self):
         object.__setattr__(self, "exports", tuple(self.exports))

@@ -1,0 +1,209 @@
+"""Geometric validity checks on an evaluated model, reported as diagnostics on the offending expression.
+
+Codes:
+    E0501  degenerate curve: a line, polyline segment, circle or B-spline of (near) zero length
+    E0502  a revolution profile crosses its axis (the surface would pass through itself)
+    W0503  coincident consecutive rows/columns in a B-spline control net (a self-overlapping net)
+    E0504  a trimming loop is not closed within the model tolerance
+    W0505  a loop piece runs backwards (its end meets the next piece's end); back ends reverse it
+    E0506  a parameter-space loop piece leaves the surface's domain
+    E0507  a 3-D loop piece does not lie on the trimmed surface (farther than the tolerance)
+
+Lazy pieces (`intersect(...)`) are not computed here: a loop that contains one is checked for
+closure and placement when a back end approximates it (`IntersectionCurve.approximate`), so
+`rgmc check` and `rgm.load` never march an intersection.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from rgm.compiler.diagnostics import Diagnostic, error, warning
+from rgm.errors import GeometryError
+from rgm.model import objects as O
+from rgm.model.lazy import IntersectionCurve
+
+_SAMPLES = 64
+
+
+def validate(model: O.Model) -> list[Diagnostic]:
+    """Every validity diagnostic of the model's objects (each object checked once)."""
+    out: list[Diagnostic] = []
+    seen: set[int] = set()
+    for obj in model.objects.values():
+        _visit(obj, model.tolerance, out, seen)
+    return out
+
+
+def _visit(obj, tol: float, out: list, seen: set) -> None:
+    if id(obj) in seen or not isinstance(obj, O.ModelObject):
+        return
+    seen.add(id(obj))
+    if isinstance(obj, IntersectionCurve):
+        return
+    if isinstance(obj, O.Curve):
+        _curve(obj, tol, out)
+        for piece in getattr(obj, "pieces", ()):
+            _visit(piece, tol, out, seen)
+    elif isinstance(obj, O.Revolution):
+        _visit(obj.profile, tol, out, seen)
+        _revolution(obj, tol, out)
+    elif isinstance(obj, O.Extrusion):
+        _visit(obj.profile, tol, out, seen)
+    elif isinstance(obj, O.RuledSurface):
+        _visit(obj.a, tol, out, seen)
+        _visit(obj.b, tol, out, seen)
+    elif isinstance(obj, O.BSplineSurface):
+        _net(obj, tol, out)
+    elif isinstance(obj, O.TrimmedFace):
+        _visit(obj.surface, tol, out, seen)
+        for lp in obj.loops():
+            for piece in lp.pieces:
+                _visit(piece, tol, out, seen)
+            _loop(obj, lp, tol, out)
+    elif isinstance(obj, O.Shell):
+        for face in obj.faces:
+            _visit(face, tol, out, seen)
+
+
+def _span(*objs):
+    return next((o.span for o in objs if getattr(o, "span", None) is not None), None)
+
+
+def _what(obj) -> str:
+    return f"`{obj.name}`" if obj.name else f"this {type(obj).__name__}"
+
+
+# --- curves and surfaces -------------------------------------------------------------------------
+
+def _curve(c, tol: float, out: list) -> None:
+    if isinstance(c, O.Polyline):
+        seg = np.linalg.norm(np.diff(c.points, axis=0), axis=1)
+        bad = np.flatnonzero(seg <= tol)
+        if bad.size:
+            i = int(bad[0])
+            out.append(error("E0501", f"polyline {_what(c)} has a zero-length segment between its points "
+                                      f"{i + 1} and {i + 2} ({seg[i]:.3g} <= tolerance {tol:g})", c.span,
+                             "degenerate segment", hint="remove the repeated point"))
+        return
+    if isinstance(c, (O.Circle, O.CircularArc)):
+        length = c.radius
+    elif isinstance(c, O.CompositeCurve):
+        return  # its pieces are checked one by one
+    elif isinstance(c, O.Line):
+        length = float(np.linalg.norm(c.p1 - c.p0))
+    elif isinstance(c, O.BSplineCurve):
+        length = float(np.linalg.norm(np.diff(np.asarray(c.curve.ctrl), axis=0), axis=1).sum())
+    else:
+        return
+    if length <= tol:
+        out.append(error("E0501", f"{_what(c)} is degenerate: its size {length:.3g} is within the tolerance {tol:g}",
+                         c.span, "zero-length curve"))
+
+
+def _revolution(r: O.Revolution, tol: float, out: list) -> None:
+    """The profile must stay on one side of the axis (it may touch it, as closed solids do)."""
+    try:
+        n = r.profile.nurbs()
+        pts = n.evaluate(np.linspace(*n.domain, _SAMPLES * max(1, len(np.unique(n.knots)))))
+    except GeometryError:
+        return
+    rel = pts - r.axis_point
+    radial = rel - np.outer(rel @ r.axis_dir, r.axis_dir)
+    dist = np.linalg.norm(radial, axis=1)
+    if dist.max() <= tol:
+        out.append(error("E0502", f"the profile of {_what(r)} lies on its axis", _span(r.profile, r),
+                         "zero-radius profile"))
+        return
+    side = radial @ (radial[int(np.argmax(dist))] / dist.max())
+    if side.min() < -tol:
+        out.append(error("E0502", f"the profile of {_what(r)} crosses its axis (it reaches {-side.min():.3g} "
+                                  f"past it); the revolved surface would pass through itself",
+                         _span(r.profile, r), "crosses the axis",
+                         hint="keep the profile on one side of the axis; it may end on it"))
+
+
+def _net(s: O.BSplineSurface, tol: float, out: list) -> None:
+    net = np.asarray(s.surface.ctrl)
+    for axis, word in ((0, "rows"), (1, "columns")):
+        gap = np.linalg.norm(np.diff(net, axis=axis), axis=2).max(axis=1 - axis)
+        bad = np.flatnonzero(gap <= tol * 1e-3)
+        if bad.size:
+            i = int(bad[0])
+            out.append(warning("W0503", f"control net of {_what(s)} has coincident {word} {i + 1} and {i + 2}: "
+                                        f"the surface overlaps itself there (zero-speed parameter lines)",
+                               s.span, "self-overlapping net"))
+
+
+# --- loops ---------------------------------------------------------------------------------------
+
+def _on_surface(surface, pts2: np.ndarray) -> np.ndarray:
+    """Points (k, 3) of parameter points (k, 2) on a model surface."""
+    if isinstance(surface, O.Plane):
+        return surface.origin + pts2[:, :1] * surface.x_dir + pts2[:, 1:] * surface.y_dir
+    return surface.nurbs().evaluate(pts2[:, 0], pts2[:, 1])
+
+
+def _ends3(surface, piece) -> tuple[np.ndarray, np.ndarray]:
+    ends = np.array([piece.start, piece.end], float)
+    return tuple(_on_surface(surface, ends)) if piece.dim == 2 else (ends[0], ends[1])
+
+
+def _loop(face: O.TrimmedFace, lp: O.Loop, tol: float, out: list) -> None:
+    if lp.is_lazy:
+        return  # checked when the intersection is approximated
+    surface = face.surface
+    placed = [(_inside_domain if p.dim == 2 else _lies_on)(surface, p, i, tol, lp) for i, p in enumerate(lp.pieces)]
+    problems = [d for d in placed if d is not None]
+    out.extend(problems)
+    if problems:
+        return  # closure is meaningless until the pieces are on the surface
+    ends = [_ends3(surface, p) for p in lp.pieces]
+    k = len(ends)
+    flipped: set[int] = set()
+    for i in range(k):
+        j = (i + 1) % k
+        end_i = ends[i][0] if i in flipped else ends[i][1]
+        gap = float(np.linalg.norm(end_i - ends[j][0]))
+        if gap <= tol:
+            continue
+        if j != 0 and np.linalg.norm(end_i - ends[j][1]) <= tol:
+            flipped.add(j)
+            out.append(warning("W0505", f"loop piece {j + 1} runs backwards: its end meets piece {i + 1}",
+                               _span(lp.pieces[j], lp), "reversed piece", hint="swap its end points"))
+            continue
+        where = "its last piece and its first" if j == 0 else f"pieces {i + 1} and {j + 1}"
+        out.append(error("E0504", f"trimming loop is not closed: a gap of {gap:.3g} between {where} "
+                                  f"(tolerance {tol:g})", _span(lp, face), "open loop"))
+        break
+
+
+def _inside_domain(surface, piece, i: int, tol: float, lp) -> Diagnostic | None:
+    if isinstance(surface, O.Plane):
+        return None
+    (u0, u1), (v0, v1) = surface.domain
+    slack = 1e-9 * max(u1 - u0, v1 - v0)
+    n = piece.nurbs()
+    uv = n.evaluate(np.linspace(*n.domain, _SAMPLES))
+    outside = ((uv[:, 0] < u0 - slack) | (uv[:, 0] > u1 + slack) | (uv[:, 1] < v0 - slack) | (uv[:, 1] > v1 + slack))
+    if outside.any():
+        p = uv[int(np.argmax(outside))]
+        return error("E0506", f"loop piece {i + 1} leaves the surface's domain [{u0:g}, {u1:g}] x [{v0:g}, {v1:g}] "
+                              f"(it reaches uv({p[0]:.4g}, {p[1]:.4g}))", _span(piece, lp), "outside the domain")
+    return None
+
+
+def _lies_on(surface, piece, i: int, tol: float, lp) -> Diagnostic | None:
+    n = piece.nurbs()
+    pts = n.evaluate(np.linspace(*n.domain, _SAMPLES))
+    if isinstance(surface, O.Plane):
+        dist = np.abs(surface.signed_distance(pts))
+    else:
+        try:
+            dist = surface.nurbs().closest_point(pts)[3]
+        except GeometryError:
+            return None
+    if dist.max() > tol:
+        return error("E0507", f"loop piece {i + 1} is {dist.max():.3g} away from the trimmed surface "
+                              f"(tolerance {tol:g})", _span(piece, lp), "not on the surface",
+                     hint="give the piece in the surface's parameters (uvline, uv points) or project it")
+    return None
