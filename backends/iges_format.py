@@ -1,0 +1,497 @@
+"""The IGES 5.3 file as data: Start, Global, Directory Entry, Parameter Data and Terminate sections.
+
+Writer (`IgesFile.to_text`) and tolerant parser (`parse_iges`) of the fixed 80-column ASCII form
+(IGES 5.3, ch. 2; layouts follow OpenCASCADE's IGESData_IGESWriter, see
+/work/shared/reference/alpha1-iges-step-notes.md §2):
+
+- every record is 80 columns, section letter in column 73, sequence number (restarting per section)
+  in columns 74-80;
+- Global (G) and Start (S) data in columns 1-72; Parameter Data (P) in columns 1-64, column 65 blank,
+  the owning entity's odd DE number in columns 66-72;
+- a Directory Entry is two records of nine 8-column fields; pointers are DE sequence numbers (odd);
+- strings are Hollerith `nH...`; reals are Python's shortest round-trip `repr` with a Fortran-readable
+  exponent (`1e-05` is written `1.E-05`), so every float reads back bit-exact; no token except an
+  over-long Hollerith string is ever split across records.
+
+Nothing here knows about geometry: `rgm.backends.iges` lowers a model to `Entity` records and
+`rgm.backends.iges_read` builds model objects from a parsed `IgesData`.
+"""
+from __future__ import annotations
+
+import bisect
+import re
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rgm.errors import BackendError
+
+__all__ = ["IgesFormatError", "GlobalSection", "Entity", "IgesFile", "DirectoryEntry", "IgesData",
+           "Hollerith", "parse_iges", "format_reals", "hollerith", "UNIT_FLAGS", "iges_date"]
+
+
+class IgesFormatError(BackendError):
+    """A malformed IGES file; the message names the record (section letter and sequence number)."""
+
+
+#: model units -> IGES Global unit flag (parameter 14) and unit name (parameter 15).
+UNIT_FLAGS = {"in": (1, "INCH"), "mm": (2, "MM"), "ft": (4, "FT"), "mi": (5, "MI"), "m": (6, "M"),
+              "km": (7, "KM"), "mil": (8, "MIL"), "um": (9, "UM"), "cm": (10, "CM"), "uin": (11, "UIN")}
+_FLAG_UNITS = {flag: unit for unit, (flag, _name) in UNIT_FLAGS.items()}
+_NAME_UNITS = {name: unit for unit, (_flag, name) in UNIT_FLAGS.items()} | {"IN": "in", "MILLIMETER": "mm"}
+
+
+# --- tokens --------------------------------------------------------------------------------------
+
+_EXP_NO_POINT = re.compile(r"(?<![0-9.])(-?[0-9]+)E")
+
+
+def format_reals(values) -> list[str]:
+    """Shortest round-trip decimal forms (`repr`) of floats (k,), with an upper-case exponent and a
+    decimal point always in the mantissa (`1e-05` -> `1.E-05`), which Fortran-style readers need.
+
+    Raises BackendError for inf/nan: IGES has no spelling for them.
+    """
+    arr = np.asarray(values, dtype=np.float64).ravel()
+    if not np.all(np.isfinite(arr)):
+        raise BackendError("IGES cannot represent a non-finite number (inf or nan) in the model")
+    text = "\x00".join(map(repr, arr.tolist()))
+    if "e" in text:
+        text = _EXP_NO_POINT.sub(r"\1.E", text.replace("e", "E"))
+    return text.split("\x00") if arr.size else []
+
+
+def hollerith(text: str) -> str:
+    """`nH...`: n counts the characters; non-ASCII characters become '?' (IGES text is ASCII)."""
+    text = text.encode("ascii", "replace").decode("ascii").replace("\n", " ").replace("\r", " ")
+    return f"{len(text)}H{text}"
+
+
+def iges_date(epoch: float | None = None) -> str:
+    """`YYYYMMDD.HHNNSS` (UTC) of `epoch` seconds (IGES 5.x date form)."""
+    return time.strftime("%Y%m%d.%H%M%S", time.gmtime(epoch))
+
+
+class Hollerith(str):
+    """A parameter that was a Hollerith string in the file (as opposed to a number or an empty field)."""
+
+
+def _tokens(values) -> list[str]:
+    """Formatted parameter tokens of a list mixing ints, floats, str (Hollerith), None (default, an
+    empty field) and float arrays (each element one real)."""
+    out: list[str] = []
+    for v in values:
+        if isinstance(v, np.ndarray):
+            out.extend(format_reals(v) if v.dtype.kind == "f" else map(str, v.ravel().tolist()))
+        elif isinstance(v, (bool, np.bool_)):
+            out.append("1" if v else "0")
+        elif isinstance(v, (int, np.integer)):
+            out.append(str(int(v)))
+        elif isinstance(v, (float, np.floating)):
+            out.extend(format_reals([v]))
+        elif isinstance(v, str):
+            out.append(hollerith(v))
+        elif v is None:
+            out.append("")
+        else:
+            raise BackendError(f"cannot write {type(v).__name__} as an IGES parameter")
+    return out
+
+
+def _pack(tokens: list[str], width: int, pdelim: str = ",", rdelim: str = ";") -> list[str]:
+    """Fill records of `width` columns with whole tokens, each followed by its delimiter; only a token
+    longer than a record (a long Hollerith string) is split. Returns the record contents."""
+    parts = [t + pdelim for t in tokens]
+    parts[-1] = tokens[-1] + rdelim
+    cum = list(np.cumsum([len(p) for p in parts]).tolist())
+    lines, i, base, n = [], 0, 0, len(parts)
+    while i < n:
+        j = bisect.bisect_right(cum, base + width, lo=i)
+        if j == i:  # one token wider than a record: split it
+            lines.extend(parts[i][k:k + width] for k in range(0, len(parts[i]), width))
+            j = i + 1
+        else:
+            lines.append("".join(parts[i:j]))
+        base, i = cum[j - 1], j
+    return lines
+
+
+# --- Global section ------------------------------------------------------------------------------
+
+@dataclass
+class GlobalSection:
+    """The 26 Global parameters of IGES 5.3 (table in the research notes §2.2), with rgm's defaults."""
+
+    param_delimiter: str = ","
+    record_delimiter: str = ";"
+    product_id: str = ""
+    file_name: str = ""
+    system_id: str = "rgm"
+    preprocessor_version: str = "rgm 0.1.0"
+    integer_bits: int = 32
+    single_max_power: int = 38
+    single_digits: int = 6
+    double_max_power: int = 308
+    double_digits: int = 15
+    receiver_product_id: str = ""
+    model_scale: float = 1.0
+    unit_flag: int = 2
+    unit_name: str = "MM"
+    line_weight_gradations: int = 1
+    max_line_weight: float = 0.01
+    date: str = "19700101.000000"
+    resolution: float = 1e-6
+    max_coordinate: float = 0.0
+    author: str = ""
+    organization: str = ""
+    version: int = 11
+    drafting_standard: int = 0
+    modified_date: str = "19700101.000000"
+    protocol: str = ""
+
+    def values(self) -> list:
+        return [getattr(self, f) for f in self.__dataclass_fields__]
+
+    @property
+    def units(self) -> str | None:
+        """Model units ('mm', 'in', ...) named by the unit flag, or by the unit name for flag 3."""
+        unit = _FLAG_UNITS.get(self.unit_flag)
+        if unit is None or self.unit_flag == 3:
+            unit = _NAME_UNITS.get(self.unit_name.strip().upper().lstrip("0123456789H"))
+        return unit
+
+
+# --- entities (writer side) ----------------------------------------------------------------------
+
+#: subordinate switch values of the status number (IGES 5.3 §2.2.4.4.9)
+INDEPENDENT, PHYSICAL, LOGICAL = 0, 1, 2
+#: use flag values
+USE_GEOMETRY, USE_DEFINITION, USE_PARAMETRIC = 0, 2, 5
+
+
+@dataclass
+class Entity:
+    """One entity to write: its type, form, parameters (ints, floats, str, None, float arrays; pointers
+    are DE numbers as ints) and Directory Entry fields. `properties` are DE numbers of property
+    entities (406 form 15 names) appended as the "additional pointers" of the parameter record."""
+
+    type: int
+    params: list
+    form: int = 0
+    subordinate: int = INDEPENDENT
+    use: int = USE_GEOMETRY
+    hierarchy: int = 1
+    blank: int = 0
+    transform: int = 0
+    color: int = 0
+    label: str = ""
+    subscript: int = 0
+    properties: list = field(default_factory=list)
+
+
+@dataclass
+class IgesFile:
+    """An IGES file under construction: `add` entities children first, then `to_text()`."""
+
+    global_section: GlobalSection
+    start: str = "rgm IGES 5.3"
+    entities: list = field(default_factory=list)
+
+    def add(self, entity: Entity) -> int:
+        """Append `entity`; returns its DE number (the pointer other entities use)."""
+        self.entities.append(entity)
+        return 2 * len(self.entities) - 1
+
+    def to_text(self) -> str:
+        """The whole file: S, G, D, P records and the T record, '\\n'-terminated, 80 columns each."""
+        g = self.global_section
+        start = [self.start[k:k + 72] for k in range(0, max(len(self.start), 1), 72)]
+        s_lines = [f"{t:<72}S{i:7d}" for i, t in enumerate(start, 1)]
+        gvals = g.values()
+        gtok = [hollerith(gvals[0]), hollerith(gvals[1])] + _tokens(gvals[2:])
+        gtok = [t if t != "0H" else "" for t in gtok]
+        g_lines = [f"{t:<72}G{i:7d}" for i, t in enumerate(_pack(gtok, 72, g.param_delimiter,
+                                                                  g.record_delimiter), 1)]
+        d_lines, p_lines = [], []
+        pseq = 1
+        for k, e in enumerate(self.entities):
+            de = 2 * k + 1
+            values = [e.type, *e.params]
+            if e.properties:
+                values += [0, len(e.properties), *e.properties]
+            records = _pack(_tokens(values), 64, g.param_delimiter, g.record_delimiter)
+            p_lines.extend(f"{r:<64} {de:7d}P{pseq + i:7d}" for i, r in enumerate(records))
+            status = f"{e.blank:02d}{e.subordinate:02d}{e.use:02d}{e.hierarchy:02d}"
+            d_lines.append(f"{e.type:8d}{pseq:8d}{0:8d}{1:8d}{0:8d}{0:8d}{e.transform:8d}{0:8d}"
+                           f"{status:>8}D{de:7d}")
+            label = e.label.encode("ascii", "replace").decode("ascii")[:8]
+            d_lines.append(f"{e.type:8d}{0:8d}{e.color:8d}{len(records):8d}{e.form:8d}{'':8}{'':8}"
+                           f"{label:>8}{e.subscript:8d}D{de + 1:7d}")
+            pseq += len(records)
+        t_line = f"S{len(s_lines):7d}G{len(g_lines):7d}D{len(d_lines):7d}P{len(p_lines):7d}{'':40}T{1:7d}"
+        return "\n".join(s_lines + g_lines + d_lines + p_lines + [t_line]) + "\n"
+
+
+# --- parsed file (reader side) -------------------------------------------------------------------
+
+@dataclass
+class DirectoryEntry:
+    """The 20 DE fields of one entity as read (blank numeric fields are 0)."""
+
+    de: int
+    type: int
+    pd_pointer: int
+    structure: int
+    line_font: int
+    level: int
+    view: int
+    transform: int
+    label_display: int
+    blank: int
+    subordinate: int
+    use: int
+    hierarchy: int
+    line_weight: int
+    color: int
+    pd_count: int
+    form: int
+    label: str
+    subscript: int
+
+    def where(self) -> str:
+        return f"entity {self.type} (form {self.form}) at DE {self.de}"
+
+
+@dataclass
+class IgesData:
+    """A parsed IGES file: start text, Global section, DEs by DE number, parameter tokens by DE number.
+
+    Parameter tokens are strings: `Hollerith` for strings, '' for a defaulted field, otherwise the
+    number's text; `params[de][0]` is the entity type.
+    """
+
+    start: str
+    global_section: GlobalSection
+    entries: dict
+    params: dict
+
+    def ints(self, de: int, first: int, count: int) -> list[int]:
+        return [self.int(de, i) for i in range(first, first + count)]
+
+    def token(self, de: int, index: int) -> str:
+        toks = self.params[de]
+        if index >= len(toks):
+            raise IgesFormatError(f"{self.entries[de].where()}: parameter {index} is missing "
+                                  f"(the record has {len(toks) - 1})")
+        return toks[index]
+
+    def int(self, de: int, index: int, default: int | None = 0) -> int:
+        tok = self.token(de, index) if index < len(self.params[de]) or default is None else ""
+        if tok == "" and default is not None:
+            return default
+        try:
+            return _to_int(tok)
+        except ValueError:
+            raise IgesFormatError(f"{self.entries[de].where()}: parameter {index} `{tok}` is not an integer") from None
+
+    def real(self, de: int, index: int, default: float | None = 0.0) -> float:
+        tok = self.token(de, index) if index < len(self.params[de]) or default is None else ""
+        if tok == "" and default is not None:
+            return default
+        try:
+            return _to_real(tok)
+        except ValueError:
+            raise IgesFormatError(f"{self.entries[de].where()}: parameter {index} `{tok}` is not a number") from None
+
+    def reals(self, de: int, first: int, count: int) -> np.ndarray:
+        """(count,) float64 parameters first .. first+count-1 (vectorised: nets can be large)."""
+        toks = self.params[de]
+        if first + count > len(toks):
+            raise IgesFormatError(f"{self.entries[de].where()}: expected {first + count - 1} parameters, "
+                                  f"the record has {len(toks) - 1}")
+        chunk = toks[first:first + count]
+        try:
+            return np.array([float(t) for t in chunk], dtype=np.float64)
+        except ValueError:
+            try:
+                return np.array([_to_real(t) for t in chunk], dtype=np.float64)
+            except ValueError as exc:
+                raise IgesFormatError(f"{self.entries[de].where()}: {exc}") from None
+
+    def string(self, de: int, index: int) -> str:
+        toks = self.params[de]
+        return str(toks[index]) if index < len(toks) else ""
+
+
+def _to_int(tok: str) -> int:
+    tok = tok.strip()
+    try:
+        return int(tok)
+    except ValueError:
+        value = _to_real(tok)
+        if value != int(value):
+            raise ValueError(tok) from None
+        return int(value)
+
+
+def _to_real(tok: str) -> float:
+    t = tok.strip().upper().replace("D", "E")
+    if not t or isinstance(tok, Hollerith):
+        raise ValueError(f"`{tok}` is not a number")
+    try:
+        value = float(t)
+    except ValueError:
+        raise ValueError(f"`{tok}` is not a number") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise ValueError(f"`{tok}` is not a finite number")
+    return value
+
+
+def _split_params(text: str, pdelim: str, rdelim: str, where) -> list[str]:
+    """Tokens of a free-format parameter string up to the record delimiter (Hollerith aware)."""
+    out: list[str] = []
+    i, n = 0, len(text)
+    while i < n:
+        while i < n and text[i] == " ":
+            i += 1
+        m = re.match(r"([0-9]+)H", text[i:i + 12])
+        if m:
+            count = int(m.group(1))
+            begin = i + len(m.group(0))
+            if begin + count > n:
+                raise IgesFormatError(f"{where()}: Hollerith string {m.group(0)} runs past the end of the data")
+            out.append(Hollerith(text[begin:begin + count]))
+            i = begin + count
+            while i < n and text[i] == " ":
+                i += 1
+            if i < n and text[i] not in (pdelim, rdelim):
+                raise IgesFormatError(f"{where()}: text after the Hollerith string `{out[-1]}` "
+                                      f"before the delimiter")
+        else:
+            j = i
+            while j < n and text[j] not in (pdelim, rdelim):
+                j += 1
+            out.append(text[i:j].strip())
+            i = j
+        if i >= n:
+            break
+        if text[i] == rdelim:
+            return out
+        i += 1
+        if i >= n:
+            out.append("")
+    return out
+
+
+def _global_delimiters(text: str) -> tuple[str, str]:
+    """Parameters 1 and 2 of the Global section: written `1H,` / `1H;` or defaulted (empty)."""
+    pdelim, rest = ",", text
+    if rest.startswith("1H"):
+        pdelim, rest = rest[2], rest[3:]
+    elif rest.startswith(","):
+        pdelim, rest = ",", rest
+    rest = rest[1:]  # the delimiter after parameter 1
+    rdelim = ";"
+    if rest.startswith("1H"):
+        rdelim = rest[2]
+    return pdelim, rdelim
+
+
+def _parse_global(text: str, record: str) -> GlobalSection:
+    g = GlobalSection()
+    if not text.strip():
+        return g
+    pdelim, rdelim = _global_delimiters(text)
+    toks = _split_params(text, pdelim, rdelim, lambda: f"Global section ({record})")
+    fields = list(g.__dataclass_fields__.values())
+    for f, tok in zip(fields[2:], toks[2:]):
+        if tok == "":
+            continue
+        try:
+            value = str(tok) if f.type == "str" else (_to_int(tok) if f.type == "int" else _to_real(tok))
+        except ValueError:
+            raise IgesFormatError(f"Global section ({record}): parameter {f.name} `{tok}` is malformed") from None
+        setattr(g, f.name, value)
+    g.param_delimiter, g.record_delimiter = pdelim, rdelim
+    return g
+
+
+def _de_int(text: str, record: str, what: str) -> int:
+    t = text.strip()
+    if not t:
+        return 0
+    try:
+        return int(t)
+    except ValueError:
+        raise IgesFormatError(f"record {record}: directory field {what} `{t}` is not an integer") from None
+
+
+_DE_FIELDS1 = ("type", "pd_pointer", "structure", "line_font", "level", "view", "transform", "label_display")
+_DE_FIELDS2 = ("type2", "line_weight", "color", "pd_count", "form")
+
+
+def parse_iges(text: str) -> IgesData:
+    """Parse the fixed-format ASCII IGES text into `IgesData`.
+
+    Tolerant of what real writers do (CR/LF endings, short records padded, blank lines, D exponents,
+    defaulted Global delimiters, comments after the record delimiter); a malformed record raises
+    IgesFormatError naming it (`D 17` is the 17th Directory record).
+    """
+    sections: dict[str, list[tuple[int, str]]] = {k: [] for k in "SGDPT"}
+    for lineno, raw in enumerate(text.splitlines(), 1):
+        line = raw.rstrip("\r\n")
+        if not line.strip():
+            continue
+        if len(line) < 73:
+            raise IgesFormatError(f"line {lineno}: record is {len(line)} columns long; IGES records have "
+                                  f"80 (section letter in column 73)")
+        letter = line[72]
+        if letter == "C" or (letter == "S" and lineno == 1 and line[72:73] == "C"):
+            raise IgesFormatError(f"line {lineno}: compressed IGES is not supported")
+        if letter not in sections:
+            raise IgesFormatError(f"line {lineno}: unknown section letter `{letter}` in column 73")
+        sections[letter].append((lineno, line.ljust(80)))
+    if not sections["D"] and not sections["G"]:
+        raise IgesFormatError("not an IGES file: no Global or Directory Entry records")
+    start = "\n".join(l[:72].rstrip() for _n, l in sections["S"])
+    gtext = "".join(l[:72] for _n, l in sections["G"]).rstrip()
+    g = _parse_global(gtext, f"G 1-{len(sections['G'])}")
+    d = sections["D"]
+    if len(d) % 2:
+        raise IgesFormatError(f"D {len(d)} (line {d[-1][0]}): the Directory Entry section has an odd number of "
+                              f"records; every entity takes two")
+    p_rows = [l[:64] for _n, l in sections["P"]]
+    entries: dict[int, DirectoryEntry] = {}
+    params: dict[int, list[str]] = {}
+    for k in range(0, len(d), 2):
+        de = k + 1
+        (n1, l1), (_n2, l2) = d[k], d[k + 1]
+        rec = f"D {de} (line {n1})"
+        f1 = [_de_int(l1[8 * i:8 * i + 8], rec, name) for i, name in enumerate(_DE_FIELDS1)]
+        f2 = [_de_int(l2[8 * i:8 * i + 8], f"D {de + 1}", name) for i, name in enumerate(_DE_FIELDS2)]
+        status = l1[64:72].replace(" ", "0")
+        if not status.isdigit():
+            raise IgesFormatError(f"{rec}: status number `{l1[64:72]}` is not numeric")
+        st = [int(status[i:i + 2]) for i in range(0, 8, 2)]
+        entry = DirectoryEntry(de, f1[0], f1[1], f1[2], f1[3], f1[4], f1[5], f1[6], f1[7], *st,
+                               f2[1], f2[2], f2[3], f2[4], l2[56:64].strip(), _de_int(l2[64:72], f"D {de + 1}",
+                                                                                       "subscript"))
+        if f2[0] != f1[0]:
+            raise IgesFormatError(f"{rec}: the two Directory records disagree on the entity type "
+                                  f"({f1[0]} and {f2[0]})")
+        entries[de] = entry
+        if entry.type == 0:
+            params[de] = ["0"]
+            continue
+        first, count = entry.pd_pointer, max(entry.pd_count, 1)
+        if first < 1 or first + count - 1 > len(p_rows):
+            raise IgesFormatError(f"{rec}: parameter pointer {first} (+{count} records) lies outside the "
+                                  f"P section of {len(p_rows)} records")
+        body = "".join(p_rows[first - 1:first - 1 + count])
+        toks = _split_params(body, g.param_delimiter, g.record_delimiter, lambda: f"P {first} ({entry.where()})")
+        if not toks or _de_int(toks[0], f"P {first}", "entity type") != entry.type:
+            raise IgesFormatError(f"P {first} ({entry.where()}): the parameter record starts with "
+                                  f"`{toks[0] if toks else ''}`, not the entity type {entry.type}")
+        params[de] = toks
+    return IgesData(start, g, entries, params)
