@@ -29,22 +29,11 @@ import scipy.sparse.linalg
 from scipy.interpolate import BSpline
 
 from rgm.errors import GeometryError
+from rgm.geometry.basis import basis_functions, find_spans
+from rgm.geometry.knots import uniform_knots
 
 
-# --------------------------------------------------------------------------------------------- knots
-def clamped_knots(degree: int, interior) -> np.ndarray:
-    """Clamped knot vector on [0, 1] with the given interior knots: (n + degree + 1,)."""
-    interior = np.sort(np.asarray(interior, float))
-    return np.r_[np.zeros(degree + 1), interior, np.ones(degree + 1)]
-
-
-def uniform_knots(degree: int, n_ctrl: int) -> np.ndarray:
-    """Clamped knot vector with uniform interior knots for `n_ctrl` control points."""
-    if n_ctrl < degree + 1:
-        raise GeometryError(f"{n_ctrl} control points are too few for degree {degree}")
-    return clamped_knots(degree, np.linspace(0.0, 1.0, n_ctrl - degree + 1)[1:-1])
-
-
+# --------------------------------------------------------------------------------------------- bases
 def design_matrix(x: np.ndarray, knots: np.ndarray, degree: int) -> sp.csr_matrix:
     """Sparse B-spline basis matrix N (m, n) with N[i, j] = N_j,p(x_i); x within the knot domain."""
     x = np.clip(np.asarray(x, float), knots[degree], knots[-degree - 1])
@@ -65,15 +54,21 @@ def _span_index(x: np.ndarray, knots: np.ndarray, degree: int) -> tuple[np.ndarr
     return idx, breaks
 
 
-def _spans_to_split(x, res, knots, degree, tol, min_width, greed=0.5):
-    """Midpoints of the spans to refine: those whose worst residual exceeds both `tol` and `greed` times
-    the worst residual of all (spans narrower than `min_width` are kept). Splitting only the worst spans
-    each round (a least-squares error spreads over neighbouring spans) avoids over-refining."""
+def _split_candidates(x, res, knots, degree, tol, min_width, greed=0.5):
+    """Midpoints of the spans to refine, worst first, and their worst residuals: the spans whose worst
+    residual exceeds both `tol` and `greed` times the worst of all (spans narrower than `min_width` are
+    kept). Splitting only the worst spans each round (a least-squares error spreads over neighbouring
+    spans) avoids over-refining."""
     idx, breaks = _span_index(x, knots, degree)
     worst = np.zeros(len(breaks) - 1)
     np.maximum.at(worst, idx, res)
-    bad = (worst > max(tol, greed * worst.max())) & (np.diff(breaks) > min_width)
-    return 0.5 * (breaks[:-1] + breaks[1:])[bad]
+    bad = np.nonzero((worst > max(tol, greed * worst.max())) & (np.diff(breaks) > min_width))[0]
+    bad = bad[np.argsort(-worst[bad], kind="stable")]
+    return 0.5 * (breaks[bad] + breaks[bad + 1]), worst[bad]
+
+
+def _spans_to_split(x, res, knots, degree, tol, min_width, greed=0.5):
+    return _split_candidates(x, res, knots, degree, tol, min_width, greed)[0]
 
 
 # --------------------------------------------------------------------------------------------- results
@@ -120,7 +115,7 @@ class SurfaceFit:
     ctrl: np.ndarray          # (nu, nv, 3)
     stats: FitStats
     residuals: np.ndarray = field(repr=False)
-    history: tuple = ()
+    history: tuple = ()        # (control points, statistic) after each knot-insertion step
     stopped: str = ""
 
     @property
@@ -240,17 +235,63 @@ def plane_parameters(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     return uv[:, 0], uv[:, 1], vt
 
 
-def _rowwise_kron(Bu: sp.csr_matrix, Bv: sp.csr_matrix, nv: int) -> sp.csr_matrix:
-    """Row-wise Kronecker product: row i is Bu[i] (x) Bv[i], (p+1)(q+1) non-zeros per row."""
-    m = Bu.shape[0]
-    ku = np.diff(Bu.indptr)[0] if m else 0
-    kv = np.diff(Bv.indptr)[0] if m else 0
-    cu, du = Bu.indices.reshape(m, ku), Bu.data.reshape(m, ku)
-    cv, dv = Bv.indices.reshape(m, kv), Bv.data.reshape(m, kv)
-    cols = (cu[:, :, None] * nv + cv[:, None, :]).reshape(m, -1)
-    data = (du[:, :, None] * dv[:, None, :]).reshape(m, -1)
-    indptr = np.arange(0, m * ku * kv + 1, ku * kv)
-    return sp.csr_matrix((data.ravel(), cols.ravel(), indptr), shape=(m, Bu.shape[1] * nv))
+@dataclass(frozen=True)
+class ScatteredBasis:
+    """The non-zero tensor-product basis values of scattered parameters: row i of the design matrix
+    holds `vals[i]` at columns `cols[i]` ((p+1)(q+1) each), and `cell[i]` names its knot cell."""
+
+    cols: np.ndarray   # (m, (p+1)(q+1)) int, flat control-point indices i_u * nv + j_v
+    vals: np.ndarray   # (m, (p+1)(q+1)) float
+    cell: np.ndarray   # (m,) int
+    shape: tuple       # (nu, nv)
+
+    @classmethod
+    def build(cls, u, v, ku, kv, p, q) -> "ScatteredBasis":
+        nu, nv = len(ku) - p - 1, len(kv) - q - 1
+        su, sv = find_spans(ku, p, u), find_spans(kv, q, v)
+        bu, bv = basis_functions(ku, p, u, su), basis_functions(kv, q, v, sv)
+        first = (su - p) * nv + (sv - q)
+        offsets = (np.arange(p + 1)[:, None] * nv + np.arange(q + 1)[None, :]).ravel()
+        vals = (bu[:, :, None] * bv[:, None, :]).reshape(len(u), -1)
+        return cls(first[:, None] + offsets, vals, first, (nu, nv))
+
+    def evaluate(self, ctrl: np.ndarray) -> np.ndarray:
+        """Surface points (m, 3) for a control net (nu, nv, 3)."""
+        return np.einsum("mk,mkd->md", self.vals, ctrl.reshape(-1, 3)[self.cols])
+
+    def normal_equations(self, points: np.ndarray):
+        """A'A (sparse, N x N) and A'P (N, 3), summed per knot cell: points in one cell share their
+        (p+1)(q+1) columns, so each cell contributes one small dense Gram matrix B_c'B_c, computed for
+        many cells at once as a batched matrix product over cells padded to a common point count."""
+        order = np.argsort(self.cell, kind="stable")
+        cell, vals, pts = self.cell[order], self.vals[order], points[order]
+        cells, first, counts = np.unique(cell, return_index=True, return_counts=True)
+        k = vals.shape[1]
+        gram = np.empty((len(cells), k, k))
+        moment = np.empty((len(cells), k, 3))
+        by_count = np.argsort(counts, kind="stable")
+        lo = 0
+        while lo < len(cells):  # groups of cells with similar counts keep the padding small
+            hi = lo + 1
+            while hi < len(cells) and counts[by_count[hi]] * (hi + 1 - lo) <= 2 * counts[by_count[lo:hi + 1]].sum() + 64 * k:
+                hi += 1
+            group = by_count[lo:hi]
+            width = counts[group].max()
+            slot = np.arange(width)[None, :]
+            take = np.minimum(first[group][:, None] + slot, len(cell) - 1)
+            live = (slot < counts[group][:, None])[:, :, None]
+            b = np.where(live, vals[take], 0.0)                      # (cells, width, k)
+            gram[group] = np.matmul(b.transpose(0, 2, 1), b)
+            moment[group] = np.matmul(b.transpose(0, 2, 1), np.where(live, pts[take], 0.0))
+            lo = hi
+        cols = self.cols[order][first]                        # (cells, k) global columns per cell
+        n = self.shape[0] * self.shape[1]
+        rows_i = np.broadcast_to(cols[:, :, None], gram.shape).ravel()
+        cols_j = np.broadcast_to(cols[:, None, :], gram.shape).ravel()
+        M = sp.coo_matrix((gram.ravel(), (rows_i, cols_j)), shape=(n, n)).tocsc()
+        rhs = np.zeros((n, 3))
+        np.add.at(rhs, cols.ravel(), moment.reshape(-1, 3))
+        return M, rhs
 
 
 def _smoothing_matrix(nu: int, nv: int) -> sp.csr_matrix:
@@ -260,22 +301,19 @@ def _smoothing_matrix(nu: int, nv: int) -> sp.csr_matrix:
 
 
 def solve_scattered(u, v, points, ku, kv, p, q, smoothing=1e-6):
-    """Least-squares control net (nu, nv, 3) for scattered points (n, 3) at parameters (u, v),
-    with a bending-energy term weighted by `smoothing` relative to the data term. Returns (ctrl, A)."""
-    Bu, Bv = design_matrix(u, ku, p), design_matrix(v, kv, q)
-    nu, nv = Bu.shape[1], Bv.shape[1]
-    A = _rowwise_kron(Bu, Bv, nv)
-    M = (A.T @ A).tocsc()
+    """Least-squares control net (nu, nv, 3) for scattered points (n, 3) at parameters (u, v), with a
+    bending-energy term weighted by `smoothing` relative to the data term. Returns (ctrl, basis)."""
+    basis = ScatteredBasis.build(np.asarray(u, float), np.asarray(v, float), ku, kv, p, q)
+    nu, nv = basis.shape
+    M, rhs = basis.normal_equations(points)
     R = _smoothing_matrix(nu, nv)
     lam = smoothing * M.diagonal().sum() / max(R.diagonal().sum(), 1e-300)
     M = (M + lam * R + 1e-14 * M.diagonal().max() * sp.identity(nu * nv)).tocsc()
-    rhs = A.T @ points
     if nu * nv <= 2500:
         ctrl = scipy.linalg.solve(M.toarray(), rhs, assume_a="pos")
     else:
-        lu = scipy.sparse.linalg.splu(M)
-        ctrl = lu.solve(rhs)
-    return ctrl.reshape(nu, nv, 3), A
+        ctrl = scipy.sparse.linalg.splu(M).solve(rhs)
+    return ctrl.reshape(nu, nv, 3), basis
 
 
 def solve_grid(u, v, grid, ku, kv, p, q, smoothing=1e-6):
@@ -322,82 +360,144 @@ def initial_net_size(grid: np.ndarray | None, mask, degree: int, n_points: int) 
     return degree + 1 + int(np.clip(np.ceil(np.sqrt(max(patches, 1))), 1, 12))
 
 
-def fit_surface(points, tol: float, *, grid_shape=None, mask=None, params=None, degree: int = 3,
+class _SurfaceProblem:
+    """The data of a surface fit and how to solve and measure it on given knot vectors: the separable
+    solve for a full grid, the sparse normal equations otherwise. Residuals are per data point."""
+
+    def __init__(self, points, mask, params, degree, smoothing):
+        pts = np.asarray(points, float)
+        self.degree, self.smoothing, self.grid = degree, smoothing, None
+        if pts.ndim == 3:
+            valid = np.isfinite(pts).all(axis=2)
+            mask = valid if mask is None else (np.asarray(mask, bool) & valid)
+            if mask.sum() < (degree + 1) ** 2:
+                raise GeometryError("too few valid grid points to fit a surface")
+            self.ug, self.vg = grid_parameters(np.where(mask[..., None], pts, 0.0), mask) if params is None else params
+            ii, jj = np.nonzero(mask)
+            self.u, self.v, self.data = self.ug[ii], self.vg[jj], pts[ii, jj]
+            self.grid = pts if mask.all() else None
+            self.shape = pts.shape[:2]
+            self.char = (pts, mask)
+        else:
+            if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < (degree + 1) ** 2:
+                raise GeometryError(f"need at least {(degree + 1) ** 2} points (n, 3) to fit a surface")
+            if not np.isfinite(pts).all():
+                raise GeometryError("points contain NaN or infinite coordinates")
+            self.u, self.v = plane_parameters(pts)[:2] if params is None else map(np.asarray, params)
+            self.data = pts
+            self.char = (None, None)
+
+    def solve(self, ku, kv):
+        """Control net (nu, nv, 3) and residuals (n,) on the knot vectors ku, kv."""
+        p = self.degree
+        if self.grid is not None:
+            ctrl, Bu, Bv = solve_grid(self.ug, self.vg, self.grid, ku, kv, p, p, self.smoothing)
+            return ctrl, self.residuals(ku, kv, ctrl, (Bu, Bv))
+        ctrl, basis = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing)
+        return ctrl, np.linalg.norm(basis.evaluate(ctrl) - self.data, axis=1)
+
+    def residuals(self, ku, kv, ctrl, bases=None):
+        p = self.degree
+        if self.grid is not None:
+            Bu, Bv = bases or (design_matrix(self.ug, ku, p), design_matrix(self.vg, kv, p))
+            return np.linalg.norm(_grid_eval(Bu, Bv, ctrl) - self.grid, axis=2).ravel()
+        return np.linalg.norm(ScatteredBasis.build(self.u, self.v, ku, kv, p, p).evaluate(ctrl) - self.data, axis=1)
+
+    def worst_per_direction(self, res):
+        """(params_u, worst_u, params_v, worst_v): each data line's worst residual for the span search."""
+        if self.grid is not None:
+            r = res.reshape(self.shape)
+            return self.ug, r.max(axis=1), self.vg, r.max(axis=0)
+        return self.u, res, self.v, res
+
+
+def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
                 n_initial: int | None = None, max_ctrl: int = 40000, statistic: str = "max",
-                smoothing: float = 1e-7) -> SurfaceFit:
+                smoothing: float = 1e-7, prune: bool = True) -> SurfaceFit:
     """Least-squares bicubic (by default) B-spline surface of `points` refined by knot insertion.
 
     points: (n, 3) scattered points, or a grid (rows, cols, 3) with optional `mask` (rows, cols) of valid
         cells (a range image keeps its grid: the grid gives the parameterisation).
+    params: optional parameters (u, v): per grid row and column for a grid, per point otherwise.
     tol: tolerance in model units for the `statistic` ("max", or "p99" etc. for scans whose noise makes
         a maximum meaningless) of the parametric residuals.
     Refinement stops when the statistic is met, when no span can be split, or when the control net
-    would exceed `max_ctrl`; `SurfaceFit.stopped` says which, and `stats.met` is False then.
+    would exceed `max_ctrl`; `SurfaceFit.stopped` says which, and `stats.met` is False then. The last
+    insertion step is then bisected (the fewest of its knots, worst spans first, that still meet the
+    tolerance) and, with `prune`, knots whose neighbourhood is far inside the tolerance are removed in
+    one batch when the fit still holds without them.
     """
-    pts = np.asarray(points, float)
-    grid = None
-    if pts.ndim == 3:
-        grid = pts
-        mask = np.isfinite(grid).all(axis=2) if mask is None else (np.asarray(mask, bool) & np.isfinite(grid).all(axis=2))
-        if mask.sum() < (degree + 1) ** 2:
-            raise GeometryError("too few valid grid points to fit a surface")
-        ug, vg = grid_parameters(np.where(mask[..., None], grid, 0.0), mask) if params is None else params
-        full = bool(mask.all())
-        ii, jj = np.nonzero(mask)
-        u, v, data = ug[ii], vg[jj], grid[ii, jj]
-    else:
-        if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < (degree + 1) ** 2:
-            raise GeometryError(f"need at least {(degree + 1) ** 2} points (n, 3) to fit a surface")
-        if not np.isfinite(pts).all():
-            raise GeometryError("points contain NaN or infinite coordinates")
-        full = False
-        u, v = (plane_parameters(pts)[:2] if params is None else params)
-        data = pts
-    n0 = n_initial or initial_net_size(grid, mask, degree, len(data))
-    ku = kv = uniform_knots(degree, n0)
-    prev, history = None, []
+    prob = _SurfaceProblem(points, mask, params, degree, smoothing)
+    ku = kv = uniform_knots(degree, n_initial or initial_net_size(*prob.char, degree, len(prob.data)))
+    prev, history, stopped, step = None, [], "", None
     while True:
-        if full:
-            ctrl, Bu, Bv = solve_grid(ug, vg, grid, ku, kv, degree, degree, smoothing)
-            res = np.linalg.norm(_grid_eval(Bu, Bv, ctrl) - grid, axis=2).ravel()
-        else:
-            ctrl, A = solve_scattered(u, v, data, ku, kv, degree, degree, smoothing)
-            res = np.linalg.norm(A @ ctrl.reshape(-1, 3) - data, axis=1)
+        ctrl, res = prob.solve(ku, kv)
         stats = fit_stats(res, tol, statistic)
-        if prev is not None and stats.value > prev[3].value:
+        if prev is not None and stats.value > prev[3].value:  # keep the refined previous shape
             ctrl = np.einsum("ia,abd,jb->ijd", refinement_matrix(prev[1], ku, degree), prev[0],
-                             refinement_matrix(prev[2], kv, degree))
-            res = _residuals(full, ug if full else u, vg if full else v, grid if full else data, ku, kv, degree, ctrl)
+                             refinement_matrix(prev[2], kv, degree), optimize=True)
+            res = prob.residuals(ku, kv, ctrl)
             stats = fit_stats(res, tol, statistic)
         history.append((ctrl.shape[0] * ctrl.shape[1], stats.value))
-        result = dict(degree_u=degree, degree_v=degree, knots_u=ku, knots_v=kv, ctrl=ctrl, stats=stats,
-                      residuals=res, history=tuple(history))
         if stats.met:
-            return SurfaceFit(**result)
-        ru = res if not full else res.reshape(grid.shape[:2])
-        new_u = _spans_to_split(u if not full else ug, ru.max(axis=1) if full else res, ku, degree, tol,
-                                0.5 / max(len(np.unique(u if not full else ug)), 1))
-        new_v = _spans_to_split(v if not full else vg, ru.max(axis=0) if full else res, kv, degree, tol,
-                                0.5 / max(len(np.unique(v if not full else vg)), 1))
+            break
+        pu, wu, pv, wv = prob.worst_per_direction(res)
+        greed = 0.5 if stats.value > 4 * tol else 0.8  # near the goal, split only the worst spans
+        step = (_split_candidates(pu, wu, ku, degree, tol, 0.5 / len(np.unique(pu)), greed),
+                _split_candidates(pv, wv, kv, degree, tol, 0.5 / len(np.unique(pv)), greed))
+        new_u, new_v = step[0][0], step[1][0]
         if len(new_u) + len(new_v) == 0:
-            return SurfaceFit(**result, stopped="no knot span can be split further: the data's own "
-                                                "sampling or noise limits the fit")
-        size = (ctrl.shape[0] + len(new_u)) * (ctrl.shape[1] + len(new_v))
-        if size > max_ctrl:
-            return SurfaceFit(**result, stopped=f"control-net limit {max_ctrl} reached")
+            stopped = "no knot span can be split further: the data's sampling or noise limits the fit"
+            break
+        if (ctrl.shape[0] + len(new_u)) * (ctrl.shape[1] + len(new_v)) > max_ctrl:
+            stopped = f"control-net limit {max_ctrl} reached"
+            break
         prev = (ctrl, ku, kv, stats)
         ku, kv = np.sort(np.r_[ku, new_u]), np.sort(np.r_[kv, new_v])
+    if stats.met and prev is not None:
+        # the last step may have overshot: bisect (three probes) on how many of its knots, worst first,
+        # are needed to meet the tolerance
+        (cu, eu), (cv, ev) = step
+        order = np.argsort(-np.r_[eu, ev], kind="stable")
+        lo, hi = 0, len(order)
+        for _ in range(3):
+            if hi - lo <= 1:
+                break
+            mid = (lo + hi) // 2
+            take = order[:mid]
+            ku2 = np.sort(np.r_[prev[1], cu[take[take < len(cu)]]])
+            kv2 = np.sort(np.r_[prev[2], cv[take[take >= len(cu)] - len(cu)]])
+            ctrl2, res2 = prob.solve(ku2, kv2)
+            stats2 = fit_stats(res2, tol, statistic)
+            if stats2.met:
+                hi = mid
+                ku, kv, ctrl, res, stats = ku2, kv2, ctrl2, res2, stats2
+            else:
+                lo = mid
+    if stats.met and prune:
+        pu, wu, pv, wv = prob.worst_per_direction(res)
+        ku2, kv2 = _removable(pu, wu, ku, degree, tol), _removable(pv, wv, kv, degree, tol)
+        if len(ku2) + len(kv2) < len(ku) + len(kv):
+            ctrl2, res2 = prob.solve(ku2, kv2)
+            stats2 = fit_stats(res2, tol, statistic)
+            if stats2.met:
+                ku, kv, ctrl, res, stats = ku2, kv2, ctrl2, res2, stats2
+    return SurfaceFit(degree, degree, ku, kv, ctrl, stats, res, tuple(history), stopped)
+
+
+def _removable(x, res, knots, degree, tol, slack=0.4):
+    """Knot vector without the interior knots whose two neighbouring spans both stay below slack x tol
+    (every other one of a run, so that no region loses all its knots at once)."""
+    idx, breaks = _span_index(x, knots, degree)
+    worst = np.zeros(len(breaks) - 1)
+    np.maximum.at(worst, idx, res)
+    inner = breaks[1:-1]
+    quiet = (worst[:-1] < slack * tol) & (worst[1:] < slack * tol)
+    drop = quiet & (np.arange(len(inner)) % 2 == 0)
+    return np.sort(np.r_[knots[:degree + 1], inner[~drop], knots[-degree - 1:]])
 
 
 def _grid_eval(Bu, Bv, ctrl):
     """Surface points on the data grid (rows, cols, 3) from the design matrices: Bu C Bv'."""
     T = np.stack([(Bu @ ctrl[:, :, k]) for k in range(3)], axis=2)              # (rows, nv, 3)
     return np.stack([(Bv @ T[:, :, k].T).T for k in range(3)], axis=2)         # (rows, cols, 3)
-
-
-def _residuals(full, u, v, data, ku, kv, degree, ctrl):
-    Bu, Bv = design_matrix(u, ku, degree), design_matrix(v, kv, degree)
-    if full:
-        return np.linalg.norm(_grid_eval(Bu, Bv, ctrl) - data, axis=2).ravel()
-    A = _rowwise_kron(Bu, Bv, ctrl.shape[1])
-    return np.linalg.norm(A @ ctrl.reshape(-1, 3) - data, axis=1)

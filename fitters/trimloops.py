@@ -3,7 +3,8 @@
 A range image's valid-pixel mask (or a rasterised cover of scattered parameters) is contoured by marching
 squares at the half-way level between valid and invalid cells, giving closed polygons in (u, v). Each is
 classified as an outer boundary (counter-clockwise) or a hole (clockwise, inside an outer one) and fitted
-by a closed 2-D B-spline refined by knot insertion until it stays within the loop tolerance, so the trimmed
+by closed 2-D B-spline pieces (split at corners) refined by knot insertion until they stay within the
+loop tolerance, so the trimmed
 surface is valid only where data was.
 """
 from __future__ import annotations
@@ -66,12 +67,49 @@ def signed_area(poly: np.ndarray) -> float:
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
+def corner_indices(poly: np.ndarray, window: int = 3, angle: float = np.deg2rad(50)) -> np.ndarray:
+    """Vertices of a closed polygon (k, 2) where the boundary turns by more than `angle` (radians),
+    judged over `window` vertices on each side so that a pixel staircase does not count as corners."""
+    k = len(poly)
+    if k < 2 * window + 2:
+        return np.zeros(0, int)
+    a = poly - np.roll(poly, window, axis=0)
+    b = np.roll(poly, -window, axis=0) - poly
+    cos = np.einsum("ij,ij->i", a, b) / np.maximum(np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300)
+    turn = np.arccos(np.clip(cos, -1, 1))
+    left = np.max([np.roll(turn, s) for s in range(1, window + 1)], axis=0)
+    right = np.max([np.roll(turn, -s) for s in range(1, window + 1)], axis=0)
+    peak = (turn > left) & (turn >= right)  # one vertex per corner, even on a plateau
+    return np.nonzero(peak & (turn > angle))[0]
+
+
+def fit_closed_loop(uv: np.ndarray, tol_uv: float, degree: int = 3) -> tuple[CurveFit, ...]:
+    """Closed polygon (k, 2) -> consecutive B-spline pieces, split at corners (C0 there, smooth between),
+    each refined by knot insertion to `tol_uv`; the pieces share their end points, so the loop closes."""
+    corners = corner_indices(uv)
+    if len(corners) == 0:
+        return (fit_curve(np.vstack([uv, uv[:1]]), tol_uv, degree=degree, fix_ends=True),)
+    rolled = np.roll(uv, -corners[0], axis=0)
+    cuts = np.r_[corners - corners[0], len(uv)]
+    pieces = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        seg = rolled[a:b + 1] if b < len(uv) else np.vstack([rolled[a:], rolled[:1]])
+        deg = min(degree, len(seg) - 1)
+        pieces.append(fit_curve(seg, tol_uv, degree=deg, fix_ends=True))
+    return tuple(pieces)
+
+
+def loop_stats_max(loop: tuple[CurveFit, ...]) -> float:
+    return max(piece.stats.max for piece in loop)
+
+
 @dataclass(frozen=True)
 class TrimLoops:
-    """Closed 2-D B-spline loops in the surface's (u, v) domain: one outer boundary and its holes."""
+    """Closed loops of 2-D B-spline pieces in the surface's (u, v) domain: one outer boundary
+    (counter-clockwise) and its holes (clockwise)."""
 
-    outer: CurveFit
-    holes: tuple[CurveFit, ...]
+    outer: tuple[CurveFit, ...]
+    holes: tuple[tuple[CurveFit, ...], ...]
     dropped: int  # further outer components (separate pieces of data) not covered by this face
 
 
@@ -108,8 +146,7 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
         uv = _to_uv(poly, np.asarray(u_of_row, float), np.asarray(v_of_col, float))
         if (signed_area(uv) > 0) != want_ccw:
             uv = uv[::-1]
-        uv = np.vstack([uv, uv[:1]])  # closed: the fit interpolates the common end point
-        return fit_curve(uv, tol_uv, degree=degree, fix_ends=True)
+        return fit_closed_loop(uv, tol_uv, degree)
 
     outer = fit(polys[outer_i], True)
     holes = tuple(fit(p, False) for i, p in enumerate(polys)
