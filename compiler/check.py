@@ -94,7 +94,7 @@ class _Checker:
         self.busy: set[str] = set()
         self.fn_results: dict[str, T.Type] = {}
         self.fn_sigs: dict[str, Signature] = {}
-        self.folder = Folder(res.bindings, res.overrides, res.units, res.fns)
+        self.folder = Folder(res.bindings, res.overrides, res.units, res.fns, self.types)
         self.values = ValueChecker(self.folder, self.diags.append)
 
     # ------------------------------------------------------------------------------------ statements
@@ -128,6 +128,7 @@ class _Checker:
                     None, notes=[f"param `{name}` is declared on line {binding.span.line}"] if binding.span else [],
                     hint=_hint(t, given, override.operand if isinstance(override, A.Neg) else override,
                                self.res.units)))
+                self.types[id(override)] = T.ANY   # never folded into value checks
         self.busy.discard(name)
         self.types[name] = t
         return t

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from . import ast as A
 from .builtins import ANNOTATIONS, FUNCTIONS
 from .diagnostics import Diagnostic, error, warning
-from .suggest import did_you_mean
+from .suggest import did_you_mean, suggest
 from .units import LENGTH_UNITS
 
 
@@ -68,6 +68,8 @@ class _Resolver:
         self.params = params or {}
         self.r = Resolution()
         self.used_locals: set[tuple[str, str]] = set()   # (fn, parameter) pairs that are read
+        self.suggested: set[str] = set()                  # names offered by "did you mean"
+        self.exported: set[str] = set()                   # every name in an `export`, fns included
 
     def report(self, diag: Diagnostic) -> None:
         self.r.diagnostics.append(diag)
@@ -129,6 +131,7 @@ class _Resolver:
                 self.report(warning("W0104", f"`{name.id}` is exported twice", name.span, "already exported"))
                 continue
             seen.add(name.id)
+            self.exported.add(name.id)
             if name.id in self.r.bindings:
                 out.append(name.id)
             elif name.id in self.r.fns:
@@ -171,6 +174,7 @@ class _Resolver:
         elif name in FUNCTIONS:
             return
         elif name in self.r.bindings:
+            self.suggested.add(name)
             self.report(error("E0112", f"`{name}` is a binding, not a function", func.span, "called here",
                               [f"`{name}` is defined on {_line(self.r.bindings[name])}"],
                               did_you_mean(name, list(FUNCTIONS) + list(self.r.fns))))
@@ -192,8 +196,10 @@ class _Resolver:
             self.report(error("E0113", f"`{name}` is a function, not a value", node.span, "used as a value", sig,
                               f"call it: `{name}(...)`"))
         elif name not in self.program.broken:
+            near = suggest(name, list(scope) + list(self.r.bindings))
+            self.suggested.update(near)   # probably meant: not reported as unused on top of this error
             self.report(error("E0101", f"undefined name `{name}`", node.span, "not defined",
-                              hint=did_you_mean(name, list(scope) + list(self.r.bindings)) or
+                              hint=f"did you mean `{near[0]}`?" if near else
                               did_you_mean(name, list(FUNCTIONS) + list(self.r.fns))))
 
     # -------------------------------------------------------------------------------- order, cycles, unused
@@ -268,7 +274,8 @@ class _Resolver:
 
     def unused(self) -> None:
         has_export = any(isinstance(s, A.Export) for s in self.program.statements)
-        roots = list(self.r.exports) if has_export else list(self.r.bindings)
+        roots = set(self.exported) if has_export else set(self.r.bindings)
+        roots = [n for n in roots | self.suggested if n in self.r.deps]
         seen, stack = set(roots), list(roots)
         while stack:
             for dep, _ref in self.r.deps.get(stack.pop(), ()):

@@ -82,7 +82,7 @@ class ValueChecker:
     # ------------------------------------------------------------------------------- helpers
     def _degree(self, args, key="degree") -> int | None:
         p = as_int(self.fold(args.get(key)))
-        if p is not None and self.problem(degree_problem(p), args[key]):
+        if p is not None and self.problem(degree_problem(p), args[key], label="not at least 1"):
             return None
         return p
 
@@ -94,8 +94,8 @@ class ValueChecker:
     def _knots_against(self, args, key: str, degree, count, what, code="E0403", notes=()) -> None:
         """Count and multiplicity of the knot vector `args[key]` for a spline of `degree` over `count`."""
         knots = self.fold(args.get(key))
-        if not isinstance(knots, Knots) or knot_order_problem(knots.values) is not None:
-            return
+        if not isinstance(knots, Knots) or len(knots.values) < 2 or knot_order_problem(knots.values) is not None:
+            return   # not constant, or already reported where it is built
         for prob in knot_vector_problems(knots, degree, count, what):
             if prob.code == "E0404" and knots.helper != "knots":
                 continue   # clamped/uniform report their own multiplicities
@@ -161,7 +161,7 @@ class ValueChecker:
         full = (0.0,) * (p + 1) + interior + (1.0,) * (p + 1)
         prob = multiplicity_problem(full, p)
         if prob is not None:
-            self.problem(prob, expr, max(0, min(prob.index - p - 1, len(interior) - 1)))
+            self.problem(prob, expr, max(0, min(prob.index - p - 1, len(interior) - 1)), "repeated too often")
 
     def _uniform(self, args):
         p = self._degree(args)
@@ -206,7 +206,7 @@ class ValueChecker:
                 self._no_double_weights(args, "the projPt points")
         if p is None or n is None:
             return result
-        if self.problem(too_few_points_problem(n, p), points_expr):
+        if self.problem(too_few_points_problem(n, p), points_expr, label=f"{n} point{'s' * (n != 1)}"):
             return result
         self._knots_against(args, "knots", p, n, "control points")
         self._weights(args, n)

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import ast as A
+from .types import ANY
 from .units import to_model
 
 
@@ -174,8 +175,9 @@ class Folder:
 
     _POINTS = {"pt": ("x", "y", "z"), "uv": ("u", "v"), "vec": ("x", "y", "z"), "projPt": ("x", "y", "z", "w")}
 
-    def __init__(self, bindings: dict, overrides: dict, units: str, user_fns=()):
+    def __init__(self, bindings: dict, overrides: dict, units: str, user_fns=(), types: dict | None = None):
         self.bindings, self.overrides, self.units = bindings, overrides, units
+        self.types = {} if types is None else types   # the checker's; ill-typed expressions never fold
         self.user_fns = set(user_fns)
         self.memo: dict[str, object] = {}
         self.busy: set[str] = set()
@@ -192,6 +194,8 @@ class Folder:
         return value
 
     def fold(self, expr, local: frozenset = frozenset()):
+        if self.types.get(id(expr)) == ANY:
+            return None
         if isinstance(expr, A.Number):
             return to_model(expr.value, expr.unit, self.units)
         if isinstance(expr, A.String):
