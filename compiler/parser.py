@@ -32,6 +32,7 @@ from rgm.grammar import GRAMMAR_PATH
 
 from . import ast as A
 from .diagnostics import Diagnostic, Span, error
+from .lalr import FastLALR, Tok
 from .netbody import NetError, read_net
 
 MAX_ERRORS = 40
@@ -54,16 +55,19 @@ _NEWLINE_GAP = re.compile(r"\n[ \t\f\r]*\n")
 _ESCAPES = {"n": "\n", "t": "\t", '"': '"', "\\": "\\"}
 
 
-def parse(text: str | bytes, filename: str = "<input>") -> tuple[A.Program | None, list[Diagnostic]]:
+def parse(text: str | bytes, filename: str = "<input>", *, fast: bool = True
+          ) -> tuple[A.Program | None, list[Diagnostic]]:
     """Parse `.rgm` source. Returns (program, diagnostics); the program is always built (None only if
     the text could not be read at all), holding the statements that parsed. Bytes are decoded as
-    UTF-8 with replacement characters. Whatever the input, this function does not raise."""
+    UTF-8 with replacement characters. Whatever the input, this function does not raise.
+    `fast=False` skips the fast driver (rgm.compiler.lalr) and uses lark's own parse loop: both build
+    the same tree, which the tests check."""
     if isinstance(text, (bytes, bytearray)):
         text = bytes(text).decode("utf-8", errors="replace")
     with _LOCK:
         run = _Run(text, filename)
         try:
-            run.parse()
+            run.parse(fast)
         except RecursionError:
             run.diags.append(error("E0009", "this expression is nested too deeply to read", run.span(0, 1)))
         return run.program(), run.diags
@@ -83,41 +87,39 @@ class _Builder(Transformer):
 
     # -- spans
     def _span(self, first, last) -> Span:
-        a = first.span if not isinstance(first, Token) else None
-        b = last.span if not isinstance(last, Token) else None
-        return Span(self.run.filename,
-                    first.line if a is None else a.line, first.column if a is None else a.col,
-                    last.end_line if b is None else b.end_line, last.end_column if b is None else b.end_col,
-                    first.start_pos if a is None else a.start_pos, last.end_pos if b is None else b.end_pos)
+        a = first if first.__class__ is Tok else _position(first)
+        b = last if last.__class__ is Tok else _position(last)
+        return Span(self.run.filename, a.line, a.col, b.end_line, b.end_col, a.start_pos, b.end_pos)
 
     # -- expressions
     def number(self, c):
         return self._number(c[0])
 
     def _number(self, tok: Token) -> A.Number:
-        text, unit = str(tok), None
-        for suffix in _UNIT_SUFFIXES:
-            if text.endswith(suffix):
-                text, unit = text[: -len(suffix)], suffix
-                break
+        text, unit = tok.value, None
+        if text[-1].isalpha():
+            for suffix in _UNIT_SUFFIXES:
+                if text.endswith(suffix):
+                    text, unit = text[: -len(suffix)], suffix
+                    break
         value = float(text)
         span = self._span(tok, tok)
         if not math.isfinite(value):
-            self.run.value_error(error("E0006", f"`{tok}` is too large for a 64-bit float", span,
+            self.run.value_error(error("E0006", f"`{tok.value}` is too large for a 64-bit float", span,
                                        "out of range", hint="the largest number is about 1.8e308"))
             value = 0.0
-        return A.Number(value, unit, not any(ch in text for ch in ".eE"), span)
+        return A.Number(value, unit, text.isdigit(), span)
 
     def string(self, c):
-        raw = str(c[0])[1:-1]
+        raw = c[0].value[1:-1]
         value = re.sub(r"\\(.)", lambda m: _ESCAPES.get(m.group(1), m.group(1)), raw) if "\\" in raw else raw
         return A.String(value, self._span(c[0], c[0]))
 
     def name(self, c):
-        return A.Name(str(c[0]), self._span(c[0], c[0]))
+        return A.Name(c[0].value, self._span(c[0], c[0]))
 
     def call(self, c):
-        func = A.Name(str(c[0]), self._span(c[0], c[0]))
+        func = A.Name(c[0].value, self._span(c[0], c[0]))
         args, kwargs = [], []
         for item in c[1:-1]:
             if isinstance(item, tuple):
@@ -132,25 +134,25 @@ class _Builder(Transformer):
         return A.Call(func, tuple(args), tuple(kwargs), self._span(c[0], c[-1]))
 
     def kwarg(self, c):
-        return (str(c[0]), c[1], self._span(c[0], c[1]))
+        return (c[0].value, c[1], self._span(c[0], c[1]))
 
     def listexpr(self, c):
         return A.ListExpr(tuple(c[1:-1]), self._span(c[0], c[-1]))
 
     def binop(self, c):
-        return A.BinOp(str(c[1]), c[0], c[2], self._span(c[0], c[2]))
+        return A.BinOp(c[1].value, c[0], c[2], self._span(c[0], c[2]))
 
     def neg(self, c):
         return A.Neg(c[1], self._span(c[0], c[1]))
 
     def member(self, c):
-        return A.Member(c[0], str(c[1]), self._span(c[0], c[1]))
+        return A.Member(c[0], c[1].value, self._span(c[0], c[1]))
 
     def net(self, c):
         tok = c[0]
         span = self._span(tok, tok)
         try:
-            shape, width, data = read_net(str(tok))
+            shape, width, data = read_net(tok.value)
         except NetError as e:
             self.run.value_error(error("E0004", e.message, self.run.span(tok.start_pos + e.start, tok.start_pos + e.end),
                                        hint=e.hint))
@@ -160,18 +162,18 @@ class _Builder(Transformer):
 
     # -- declarations
     def type(self, c):
-        return A.TypeRef(str(c[0]), tuple(x for x in c[1:] if isinstance(x, A.TypeRef)), self._span(c[0], c[-1]))
+        return A.TypeRef(c[0].value, tuple(x for x in c[1:] if isinstance(x, A.TypeRef)), self._span(c[0], c[-1]))
 
     def param(self, c):
-        return A.Param(str(c[0]), c[1], self._span(c[0], c[1]))
+        return A.Param(c[0].value, c[1], self._span(c[0], c[1]))
 
     def annotation(self, c):
         args = tuple(x[:2] for x in c[1:] if isinstance(x, tuple))
-        return A.Annotation(str(c[0])[1:], args, self._span(c[0], c[-1]))
+        return A.Annotation(c[0].value[1:], args, self._span(c[0], c[-1]))
 
     # -- statements
     def units(self, c):
-        unit = str(c[1])
+        unit = c[1].value
         if unit not in A.LENGTH_UNITS:
             self.run.value_error(error("E0008", f"unknown units `{unit}`", self._span(c[1], c[1]),
                                        "expected mm, cm, m or in", hint="write `units mm;`"))
@@ -183,9 +185,9 @@ class _Builder(Transformer):
     def binding(self, c):
         annotations = tuple(x for x in c if isinstance(x, A.Annotation))
         rest = c[len(annotations):]
-        is_param = isinstance(rest[0], Token) and rest[0].type == "PARAM"
+        is_param = type(rest[0]) in _TOKENS and rest[0].type == "PARAM"
         name = rest[1] if is_param else rest[0]
-        stmt = A.Binding(str(name), c[-2], is_param, annotations, span=self._span(c[0], c[-1]),
+        stmt = A.Binding(name.value, c[-2], is_param, annotations, span=self._span(c[0], c[-1]),
                          name_span=self._span(name, name))
         return self.run.statement(stmt)
 
@@ -193,12 +195,12 @@ class _Builder(Transformer):
         annotations = tuple(x for x in c if isinstance(x, A.Annotation))
         name = c[len(annotations) + 1]
         params = tuple(x for x in c if isinstance(x, A.Param))
-        stmt = A.FnDef(str(name), params, c[-2], annotations, span=self._span(c[0], c[-1]),
+        stmt = A.FnDef(name.value, params, c[-2], annotations, span=self._span(c[0], c[-1]),
                        name_span=self._span(name, name))
         return self.run.statement(stmt)
 
     def export(self, c):
-        names = tuple(A.Name(str(t), self._span(t, t)) for t in c[1:-1])
+        names = tuple(A.Name(t.value, self._span(t, t)) for t in c[1:-1])
         return self.run.statement(A.Export(names, span=self._span(c[0], c[-1])))
 
     def start(self, c):
@@ -208,6 +210,8 @@ class _Builder(Transformer):
 _BUILDER = _Builder()
 _LOCK = threading.RLock()
 _PARSER: Lark | None = None
+_FAST: FastLALR | None = None
+_TOKENS = (Token, Tok)
 
 
 def lark_parser() -> Lark:
@@ -218,6 +222,19 @@ def lark_parser() -> Lark:
                        transformer=_BUILDER, maybe_placeholders=False, cache=False,
                        lexer_callbacks={"COMMENT": _on_comment})
     return _PARSER
+
+
+def fast_parser() -> FastLALR:
+    """The tight driver over the same LALR table (rgm.compiler.lalr), used first by `parse`."""
+    global _FAST
+    if _FAST is None:
+        _FAST = FastLALR(lark_parser(), _BUILDER)
+    return _FAST
+
+
+def _position(x):
+    """Something with Span's position fields: a node's span, or a lark Token converted."""
+    return Tok.from_lark(x) if x.__class__ is Token else x.span
 
 
 def _on_comment(tok: Token):
@@ -267,8 +284,14 @@ class _Run:
         return stmt
 
     # -- the parse loop
-    def parse(self):
+    def parse(self, fast: bool = True):
+        """The fast driver first; on a syntax error, start again with lark's parser and recover."""
         _BUILDER.run = self
+        if fast:
+            if fast_parser().parse(self.text, self.comments.append):
+                return
+            self.__init__(self.text, self.filename)
+            _BUILDER.run = self
         parser = lark_parser()
         start = 0
         while True:
@@ -298,7 +321,7 @@ class _Run:
                                         "expected `;` here", hint="every statement ends with `;`"))
             try:
                 ip = e.interactive_parser
-                ip.feed_token(Token("SEMI", ";", at, 0, 0, 0, 0, at + 1))
+                ip.feed_token(self.token("SEMI", ";", at, at))
                 if e.token.type != "$END":
                     ip.feed_token(e.token)
                 return True
@@ -356,10 +379,15 @@ class _Run:
     def feed(self, e: UnexpectedInput, kind: str, value: str, pos: int) -> bool:
         """Give the parser a stand-in token after a lexical error; False when it does not fit."""
         try:
-            e.interactive_parser.feed_token(Token(kind, value, pos, 0, 0, 0, 0, pos))
+            e.interactive_parser.feed_token(self.token(kind, value, pos, pos + 1))
             return True
         except UnexpectedInput:
             return True  # the lexer already moved past; the next token reports what is wrong
+
+    def token(self, kind: str, value: str, start: int, end: int) -> Token:
+        """A stand-in lark Token over text[start:end] (an inserted `;`, a closed string)."""
+        sp = self.span(start, end)
+        return Token(kind, value, start, sp.line, sp.col, sp.end_line, sp.end_col, end)
 
     def recover(self, e: UnexpectedInput) -> int | None:
         """Report an error the hook could not fix, keep the statements completed before it, and
@@ -414,10 +442,13 @@ class _Run:
 
     # -- the result
     def program(self) -> A.Program:
-        comments = sorted({t.start_pos: t for t in self.comments}.values(), key=lambda t: t.start_pos)
+        comments = sorted({t.start_pos: t if t.__class__ is Tok else Tok.from_lark(t) for t in self.comments}.values(),
+                          key=lambda t: t.start_pos)
         stmts, end_comments = _attach_comments(self.text, self.statements, comments)
         return A.Program(tuple(stmts), tuple(end_comments),
-                         tuple(A.Comment(str(t).rstrip(), self.span(t.start_pos, t.end_pos)) for t in comments),
+                         tuple(A.Comment(t.value.rstrip(), Span(self.filename, t.line, t.col, t.end_line,
+                                                               t.end_col, t.start_pos, t.end_pos))
+                               for t in comments),
                          frozenset(self.broken), self.span(0, len(self.text)))
 
 
@@ -432,20 +463,20 @@ def _attach_comments(text: str, statements: list, comments: list[Token]):
         while ci < len(comments) and comments[ci].start_pos < sp.end_pos:
             if not leading:
                 first_pos = min(first_pos, comments[ci].start_pos)
-            leading.append(str(comments[ci]).rstrip())
+            leading.append(comments[ci].value.rstrip())
             ci += 1
         trailing = None
         next_start = statements[k + 1].span.start_pos if k + 1 < len(statements) else len(text) + 1
         if (ci < len(comments) and comments[ci].line == sp.end_line and comments[ci].start_pos < next_start
                 and "\n" not in text[sp.end_pos:comments[ci].start_pos]):
-            trailing = str(comments[ci]).rstrip()
+            trailing = comments[ci].value.rstrip()
             ci += 1
         blank = k > 0 and bool(_NEWLINE_GAP.search(text, prev_end, first_pos))
         if leading or trailing or blank:
             stmt = replace(stmt, leading=tuple(leading), trailing=trailing, blank_before=blank)
         out.append(stmt)
         prev_end = sp.end_pos
-    return out, [str(t).rstrip() for t in comments[ci:]]
+    return out, [t.value.rstrip() for t in comments[ci:]]
 
 
 def _blank(text: str, start: int) -> str:
