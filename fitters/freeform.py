@@ -29,6 +29,7 @@ import scipy.sparse.linalg
 from scipy.interpolate import BSpline
 
 from rgm.errors import GeometryError
+from rgm.fitters.certificate import Certificate, certify
 from rgm.geometry.basis import basis_functions, find_spans
 from rgm.geometry.knots import uniform_knots
 
@@ -72,28 +73,9 @@ def _spans_to_split(x, res, knots, degree, tol, min_width, greed=0.5):
 
 
 # --------------------------------------------------------------------------------------------- results
-@dataclass(frozen=True)
-class FitStats:
-    """Deviation figures of a fit, model units. `statistic` names what `value` is (and what tol bounds)."""
-
-    points: int
-    max: float
-    rms: float
-    p95: float
-    statistic: str
-    value: float
-    tol: float
-
-    @property
-    def met(self) -> bool:
-        return self.value <= self.tol
-
-
-def fit_stats(res: np.ndarray, tol: float, statistic: str) -> FitStats:
-    res = np.asarray(res, float)
-    value = float(res.max()) if statistic == "max" else float(np.percentile(res, float(statistic.lstrip("p"))))
-    return FitStats(len(res), float(res.max()), float(np.sqrt(np.mean(res**2))),
-                    float(np.percentile(res, 95)), statistic, value, float(tol))
+def fit_stats(res: np.ndarray, tol: float, statistic: str) -> Certificate:
+    """The certificate of a set of residuals (model units): `statistic` is "max", "p99" or "p95"."""
+    return certify(res, tol, statistic=statistic)
 
 
 @dataclass(frozen=True)
@@ -101,7 +83,7 @@ class CurveFit:
     degree: int
     knots: np.ndarray
     ctrl: np.ndarray          # (n, d)
-    stats: FitStats
+    stats: Certificate
     history: tuple = ()        # (n_ctrl, value) after each solve
     stopped: str = ""          # why refinement stopped when the tolerance is not met
 
@@ -113,7 +95,7 @@ class SurfaceFit:
     knots_u: np.ndarray
     knots_v: np.ndarray
     ctrl: np.ndarray          # (nu, nv, 3)
-    stats: FitStats
+    stats: Certificate
     residuals: np.ndarray = field(repr=False)
     history: tuple = ()        # (control points, statistic) after each knot-insertion step
     stopped: str = ""
@@ -181,7 +163,7 @@ def fit_curve(points, tol: float, *, params=None, degree: int = 3, n_initial: in
             res = np.linalg.norm(B @ ctrl - points, axis=1)
             stats = fit_stats(res, tol, statistic)
         history.append((len(ctrl), stats.value))
-        if stats.met:
+        if stats.holds:
             return CurveFit(degree, knots, ctrl, stats, tuple(history))
         new = _spans_to_split(t, res, knots, degree, tol, min_width)
         if len(new) == 0:
@@ -413,7 +395,7 @@ class _SurfaceProblem:
 
 def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
                 n_initial: int | None = None, max_ctrl: int = 40000, statistic: str = "max",
-                smoothing: float = 1e-7, prune: bool = True) -> SurfaceFit:
+                smoothing: float = 1e-7, prune: int = 8) -> SurfaceFit:
     """Least-squares bicubic (by default) B-spline surface of `points` refined by knot insertion.
 
     points: (n, 3) scattered points, or a grid (rows, cols, 3) with optional `mask` (rows, cols) of valid
@@ -422,10 +404,10 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
     tol: tolerance in model units for the `statistic` ("max", or "p99" etc. for scans whose noise makes
         a maximum meaningless) of the parametric residuals.
     Refinement stops when the statistic is met, when no span can be split, or when the control net
-    would exceed `max_ctrl`; `SurfaceFit.stopped` says which, and `stats.met` is False then. The last
+    would exceed `max_ctrl`; `SurfaceFit.stopped` says which, and `stats.holds` is False then. The last
     insertion step is then bisected (the fewest of its knots, worst spans first, that still meet the
-    tolerance) and, with `prune`, knots whose neighbourhood is far inside the tolerance are removed in
-    one batch when the fit still holds without them.
+    tolerance); then knots whose neighbourhood is far inside the tolerance are removed in one batch, and
+    up to `prune` single knots, quietest first, each only when the fit still holds without it.
     """
     prob = _SurfaceProblem(points, mask, params, degree, smoothing)
     ku = kv = uniform_knots(degree, n_initial or initial_net_size(*prob.char, degree, len(prob.data)))
@@ -439,7 +421,7 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
             res = prob.residuals(ku, kv, ctrl)
             stats = fit_stats(res, tol, statistic)
         history.append((ctrl.shape[0] * ctrl.shape[1], stats.value))
-        if stats.met:
+        if stats.holds:
             break
         pu, wu, pv, wv = prob.worst_per_direction(res)
         greed = 0.5 if stats.value > 4 * tol else 0.8  # near the goal, split only the worst spans
@@ -454,7 +436,7 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
             break
         prev = (ctrl, ku, kv, stats)
         ku, kv = np.sort(np.r_[ku, new_u]), np.sort(np.r_[kv, new_v])
-    if stats.met and prev is not None:
+    if stats.holds and prev is not None:
         # the last step may have overshot: bisect (three probes) on how many of its knots, worst first,
         # are needed to meet the tolerance
         (cu, eu), (cv, ev) = step
@@ -469,32 +451,64 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
             kv2 = np.sort(np.r_[prev[2], cv[take[take >= len(cu)] - len(cu)]])
             ctrl2, res2 = prob.solve(ku2, kv2)
             stats2 = fit_stats(res2, tol, statistic)
-            if stats2.met:
+            if stats2.holds:
                 hi = mid
                 ku, kv, ctrl, res, stats = ku2, kv2, ctrl2, res2, stats2
             else:
                 lo = mid
-    if stats.met and prune:
-        pu, wu, pv, wv = prob.worst_per_direction(res)
-        ku2, kv2 = _removable(pu, wu, ku, degree, tol), _removable(pv, wv, kv, degree, tol)
-        if len(ku2) + len(kv2) < len(ku) + len(kv):
-            ctrl2, res2 = prob.solve(ku2, kv2)
-            stats2 = fit_stats(res2, tol, statistic)
-            if stats2.met:
-                ku, kv, ctrl, res, stats = ku2, kv2, ctrl2, res2, stats2
+    if stats.holds and prune:
+        ku, kv, ctrl, res, stats = _prune(prob, ku, kv, ctrl, res, stats, tol, statistic, prune)
     return SurfaceFit(degree, degree, ku, kv, ctrl, stats, res, tuple(history), stopped)
 
 
-def _removable(x, res, knots, degree, tol, slack=0.4):
-    """Knot vector without the interior knots whose two neighbouring spans both stay below slack x tol
-    (every other one of a run, so that no region loses all its knots at once)."""
+def _neighbourhood_error(x, res, knots, degree):
+    """Interior break points and the worse of the two spans' worst residuals on either side of each."""
     idx, breaks = _span_index(x, knots, degree)
     worst = np.zeros(len(breaks) - 1)
     np.maximum.at(worst, idx, res)
-    inner = breaks[1:-1]
-    quiet = (worst[:-1] < slack * tol) & (worst[1:] < slack * tol)
-    drop = quiet & (np.arange(len(inner)) % 2 == 0)
-    return np.sort(np.r_[knots[:degree + 1], inner[~drop], knots[-degree - 1:]])
+    return breaks[1:-1], np.maximum(worst[:-1], worst[1:])
+
+
+def _without(knots, degree, drop_values):
+    inner = knots[degree + 1:-degree - 1]
+    keep = ~np.isin(inner, drop_values)
+    return np.r_[knots[:degree + 1], inner[keep], knots[-degree - 1:]]
+
+
+def _prune(prob, ku, kv, ctrl, res, stats, tol, statistic, attempts, slack=0.4):
+    """Knot removal after the tolerance holds: first one batch (every other knot whose neighbouring
+    spans both stay below slack x tol), then single knots, quietest neighbourhood first, `attempts`
+    re-solves in all; each removal is kept only if the re-solved fit still holds."""
+    def candidates(res):
+        pu, wu, pv, wv = prob.worst_per_direction(res)
+        bu, eu = _neighbourhood_error(pu, wu, ku, prob.degree)
+        bv, ev = _neighbourhood_error(pv, wv, kv, prob.degree)
+        return bu, eu, bv, ev
+
+    bu, eu, bv, ev = candidates(res)
+    batch = (bu[(eu < slack * tol) & (np.arange(len(bu)) % 2 == 0)],
+             bv[(ev < slack * tol) & (np.arange(len(bv)) % 2 == 0)])
+    tried = set()
+    for attempt in range(int(attempts) + 1):
+        if attempt == 0:
+            drop_u, drop_v = batch
+            if len(drop_u) + len(drop_v) == 0:
+                continue
+        else:
+            bu, eu, bv, ev = candidates(res)
+            order = [i for i in np.argsort(np.r_[eu, ev], kind="stable")
+                     if (i < len(bu), float(bu[i] if i < len(bu) else bv[i - len(bu)])) not in tried]
+            if not order:
+                break
+            i = order[0]
+            drop_u, drop_v = ((bu[i],), ()) if i < len(bu) else ((), (bv[i - len(bu)],))
+            tried.add((i < len(bu), float(bu[i] if i < len(bu) else bv[i - len(bu)])))
+        ku2, kv2 = _without(ku, prob.degree, drop_u), _without(kv, prob.degree, drop_v)
+        ctrl2, res2 = prob.solve(ku2, kv2)
+        stats2 = fit_stats(res2, tol, statistic)
+        if stats2.holds:
+            ku, kv, ctrl, res, stats = ku2, kv2, ctrl2, res2, stats2
+    return ku, kv, ctrl, res, stats
 
 
 def _grid_eval(Bu, Bv, ctrl):

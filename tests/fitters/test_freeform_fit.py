@@ -8,7 +8,7 @@ from rgm.errors import GeometryError
 from rgm.fitters.freeform import (design_matrix, fit_curve, fit_surface, refinement_matrix, solve_grid,
                                   uniform_knots)
 
-SETTINGS = settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 def smooth_grid(seed, rows=90, cols=80, noise=0.0):
@@ -39,7 +39,7 @@ def test_surface_meets_tolerance_and_error_never_rises(seed):
     grid = smooth_grid(seed, noise=0.01)
     tol = 0.08
     fit = fit_surface(grid, tol, params=(np.linspace(0, 1, grid.shape[0]), np.linspace(0, 1, grid.shape[1])))
-    assert fit.stats.met, fit.stopped
+    assert fit.stats.holds, fit.stopped
     assert fit.stats.max <= tol
     values = [v for _, v in fit.history]
     assert all(b <= a + 1e-12 for a, b in zip(values, values[1:])), values
@@ -50,14 +50,14 @@ def test_surface_meets_tolerance_and_error_never_rises(seed):
     assert np.isclose(dev.max(), fit.stats.max, rtol=1e-9)
 
 
-@settings(max_examples=6, deadline=None)
+@settings(max_examples=5, deadline=None)
 @given(seed=st.integers(0, 10_000))
 def test_adaptive_net_is_smaller_than_the_smallest_uniform_net_that_meets_tol(seed):
     grid = smooth_grid(seed, noise=0.01)
     tol = 0.08
     params = (np.linspace(0, 1, grid.shape[0]), np.linspace(0, 1, grid.shape[1]))
     fit = fit_surface(grid, tol, params=params)
-    assert fit.stats.met
+    assert fit.stats.holds
     n = 4
     while uniform_fit_error(grid, n) > tol:
         n += 1
@@ -69,13 +69,13 @@ def test_scattered_points_meet_tolerance():
     rng = np.random.default_rng(1)
     pts = grid.reshape(-1, 3)[rng.choice(grid.shape[0] * grid.shape[1], 5000, replace=False)]
     fit = fit_surface(pts, 0.05)
-    assert fit.stats.met and fit.stats.max <= 0.05
+    assert fit.stats.holds and fit.stats.max <= 0.05
 
 
 def test_tolerance_below_the_noise_stops_honestly():
     grid = smooth_grid(3, noise=0.5)
     fit = fit_surface(grid, 0.01, max_ctrl=400)
-    assert not fit.stats.met
+    assert not fit.stats.holds
     assert fit.stopped  # says why instead of pretending
 
 
@@ -97,7 +97,7 @@ def test_curve_refines_only_where_needed():
     x = np.linspace(0, 100, 800)
     y = 5 * np.tanh((x - 70) / 1.5)  # a sharp step near x = 70 mm, flat elsewhere
     fit = fit_curve(np.c_[x, y], 0.05)
-    assert fit.stats.met
+    assert fit.stats.holds
     interior = fit.knots[4:-4]
     # chord-length parameter of x = 70 mm
     d = np.linalg.norm(np.diff(np.c_[x, y], axis=0), axis=1)
