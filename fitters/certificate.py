@@ -66,3 +66,63 @@ def surface_coverage(surface_samples, points, radius: float) -> float:
 
     d, _ = cKDTree(points).query(surface_samples, k=1, distance_upper_bound=radius)
     return float(np.mean(np.isfinite(d)))
+
+
+# ------------------------------------------------------------------------ shapes from a compiled model
+def _rz(p, axis_point, axis_dir):
+    d = np.asarray(p, float) - axis_point
+    z = d @ axis_dir
+    return np.array([np.linalg.norm(d - z * axis_dir), z])
+
+
+def _profile_segments(curve, axis_point, axis_dir):
+    from rgm.fitters.profile2d import Segment
+    from rgm.model.objects import CircularArc, CompositeCurve, Line, Polyline
+
+    if isinstance(curve, CompositeCurve):
+        return [s for piece in curve.pieces for s in _profile_segments(piece, axis_point, axis_dir)]
+    if isinstance(curve, Polyline):
+        pts = [_rz(p, axis_point, axis_dir) for p in curve.points]
+        return [Segment(a, b) for a, b in zip(pts, pts[1:])]
+    if isinstance(curve, Line):
+        return [Segment(_rz(curve.p0, axis_point, axis_dir), _rz(curve.p1, axis_point, axis_dir))]
+    if isinstance(curve, CircularArc):
+        from scipy.spatial.transform import Rotation
+
+        n = np.asarray(curve.normal, float) / np.linalg.norm(curve.normal)
+        u, v = curve.start_point - curve.center, curve.end_point - curve.center
+        sweep = np.arctan2(np.cross(u, v) @ n, u @ v) % (2 * np.pi) or 2 * np.pi
+        mid = curve.center + Rotation.from_rotvec(n * sweep / 2).apply(u)
+        c = _rz(curve.center, axis_point, axis_dir)
+        return [Segment(_rz(curve.start_point, axis_point, axis_dir), _rz(curve.end_point, axis_point, axis_dir),
+                        c, float(curve.radius), _rz(mid, axis_point, axis_dir))]
+    raise ValueError(f"cannot measure a profile made of {type(curve).__name__}")
+
+
+def shape_from_model(obj):
+    """A measurable shape (RevolutionFit or BoxFit, both with `.distance(points)`) for an evaluated model
+    object of the kinds `rgmc fit` writes: a full Revolution, or a Shell whose sides are an Extrusion of
+    a closed rectangle (a box)."""
+    from rgm.fitters.primitives import BoxFit
+    from rgm.fitters.profile2d import Profile
+    from rgm.fitters.revolution import RevolutionFit
+    from rgm.model.objects import Extrusion, Polyline, Revolution, Shell, TrimmedFace
+
+    if isinstance(obj, Revolution):
+        a = np.asarray(obj.axis_point, float)
+        d = np.asarray(obj.axis_dir, float) / np.linalg.norm(obj.axis_dir)
+        frame = np.eye(4)
+        frame[:3, 1], frame[:3, 3] = d, a
+        return RevolutionFit(frame, Profile(tuple(_profile_segments(obj.profile, a, d))), float("nan"))
+    if isinstance(obj, Shell):
+        for face in obj.faces:
+            surf = face.surface if isinstance(face, TrimmedFace) else face
+            if isinstance(surf, Extrusion) and isinstance(surf.profile, Polyline) and len(surf.profile.points) == 5:
+                p = np.asarray(surf.profile.points, float)
+                h = np.asarray(surf.direction, float)
+                e1, e2 = p[1] - p[0], p[3] - p[0]
+                frame = np.eye(4)
+                frame[:3, :3] = np.column_stack([e / np.linalg.norm(e) for e in (e1, e2, h)])
+                frame[:3, 3] = p[0] + (e1 + e2 + h) / 2
+                return BoxFit(frame, np.array([np.linalg.norm(e1), np.linalg.norm(e2), np.linalg.norm(h)]) / 2)
+    raise ValueError(f"rgmc verify cannot measure a {type(obj).__name__} yet (revolutions and boxes only)")

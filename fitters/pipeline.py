@@ -54,15 +54,23 @@ def sha256_of(path) -> str:
     return h.hexdigest()
 
 
-def _build(points, normals, cls, tol, seed):
+def _build(points, cls, tol, seed, max_normals=20000):
+    """The exact shape for a classified part, or None.  Normals (robust PCA) are estimated on at most
+    `max_normals` points: the axis and the box faces need their directions, not every point's."""
+    from rgm.fitters.normals import pca_normals
     from rgm.fitters.primitives import fit_box
     from rgm.fitters.revolution import fit_revolution
 
-    if cls.category in REVOLUTION_KINDS:
-        return fit_revolution(points, normals, tol=tol, axis_hint=cls.superellipsoid.rotation[:, 2], seed=seed)
+    if cls.category not in REVOLUTION_KINDS and cls.category != "box":
+        return None
+    sub = points
+    if len(points) > max_normals:
+        sub = points[np.random.default_rng(seed).choice(len(points), max_normals, replace=False)]
+    normals, _ = pca_normals(sub)
     if cls.category == "box":
-        return fit_box(points, normals, cls.superellipsoid.rotation)
-    return None
+        return fit_box(sub, normals, cls.superellipsoid.rotation)
+    return fit_revolution(sub, normals, tol=tol, axis_hint=cls.superellipsoid.rotation[:, 2], seed=seed,
+                          profile_points=points)
 
 
 def _surface_samples(shape, spacing):
@@ -80,7 +88,6 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
     from rgm.fitters.certificate import certify, surface_coverage
     from rgm.fitters.classify import classify, spacing as point_spacing, split_parts
     from rgm.fitters.emit import annotations, emit_part, write_rgm
-    from rgm.fitters.normals import pca_normals
 
     stages = stages or _Stages(False)
     points = np.asarray(points, float)
@@ -101,8 +108,7 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
                                     "center": cls.superellipsoid.center.tolist(),
                                     "quality": cls.superellipsoid.quality}}
         with stages("build"):
-            normals, _ = pca_normals(pts)
-            shape = _build(pts, normals, cls, tol, seed)
+            shape = _build(pts, cls, tol, seed)
         if shape is None:
             msg = (f"{name}: classified {cls.category} (confidence {cls.confidence:.2f}); no exact builder for it "
                    f"yet (free-form NURBS surfaces are a separate step), so it is not modelled")

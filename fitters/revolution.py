@@ -79,9 +79,13 @@ def _slab_residuals(key, value, bins):
     return value - (sums / np.maximum(counts, 1))[idx]
 
 
-def refine_axis(points, normals, axis_point, axis_dir, *, bins: int = 60):
-    """Refine an axis by minimising the profile's spread (module docstring, step 2).
-    Returns (point, direction, robust sigma of the spread residuals)."""
+def refine_axis(points, normals, axis_point, axis_dir, *, bins: int = 60, max_points: int = 8000, seed: int = 0):
+    """Refine an axis by minimising the profile's spread (module docstring, step 2), on at most
+    `max_points` points (fixed-seed subsample).  Returns (point, direction, robust sigma of the spread
+    residuals)."""
+    if len(points) > max_points:
+        keep = np.random.default_rng(seed).choice(len(points), max_points, replace=False)
+        points, normals = points[keep], normals[keep]
     axis_dir = _unit(axis_dir)
     u, v = _perp_basis(axis_dir)
     mantle = np.abs(normals @ axis_dir) < 0.5
@@ -124,8 +128,12 @@ class RevolutionFit:
         return self.profile.distance(profile_coordinates(points, self.frame[:3, 3], self.frame[:3, 1]))
 
 
-def fit_revolution(points, normals, *, tol: float, axis_hint=None, seed: int = 0) -> RevolutionFit:
+def fit_revolution(points, normals, *, tol: float, axis_hint=None, seed: int = 0,
+                   profile_points=None) -> RevolutionFit:
     """Fit a surface of revolution with a conic-section profile to points and unit normals (n, 3).
+
+    The axis comes from `points` and `normals` (a subsample is enough); the profile from
+    `profile_points` (m, 3) (default: `points`).
 
     axis_hint : optional unit vector (e.g. a superellipsoid's symmetry axis) used if the normals are
     degenerate (all normals meet many lines, as on a sphere).  tol : the requested tolerance; the
@@ -140,7 +148,7 @@ def fit_revolution(points, normals, *, tol: float, axis_hint=None, seed: int = 0
         p = points.mean(axis=0)
     p, d, sigma = refine_axis(points, normals, p, d)
     d = d if d[np.argmax(np.abs(d))] > 0 else -d         # canonical: the axis' largest component positive
-    rz = profile_coordinates(points, p, d)
+    rz = profile_coordinates(points if profile_points is None else np.asarray(profile_points, float), p, d)
     thr = max(3.0 * sigma, tol / 4.0, 1e-9 * np.ptp(rz))
     profile = fit_conic_profile(rz, thr=thr, seed=seed)
     # part frame: origin at the lowest profile z on the axis, y = axis

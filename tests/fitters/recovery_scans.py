@@ -83,7 +83,7 @@ def scan_views(hit_fn, directions, centre, size, *, pitch, noise, outliers, seed
     return views
 
 
-def pin_views(*, chamfer=0.0, noise=0.03, outliers=0.05, seed=0, pose=np.eye(4), pitch=0.6):
+def pin_views(*, chamfer=0.0, noise=0.03, outliers=0.05, seed=0, pose=np.eye(4), pitch=0.75):
     """Several range views of the paper's pin (axis along y), three around the axis and two oblique views
     that see the end caps."""
     prof = pin_profile(chamfer=chamfer)

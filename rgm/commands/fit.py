@@ -1,0 +1,102 @@
+"""`rgmc fit VIEW... [--poses FILE.conf] --tol T -o part.rgm [--report fit.json] [--force]`.
+
+Runs the fitting pipeline (`rgm.fitters.pipeline`): intake, outlier filtering, registration (only with
+--register; otherwise the views must be in one frame, possibly through --poses), splitting,
+superellipsoid classification, the exact builders, certificates, and writes the `.rgm` procedure
+(checked by the compiler's parser and type checker before it is written) and an optional JSON report
+with per-stage timings.  Exit codes: 0 written, 1 bad input or nothing could be modelled, 2 usage.
+"""
+from __future__ import annotations
+
+import os
+
+# the fitters solve many small least-squares problems: BLAS threads only add synchronisation (and are
+# pathological on busy machines), so a fresh `rgmc fit`/`verify` process runs BLAS single-threaded
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import json
+import sys
+from pathlib import Path
+
+from rgm.fitters.certificate import STATISTICS
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("views", nargs="+", metavar="VIEW", help="scan files (ply, xyz, npy, ...) or one .conf")
+    parser.add_argument("--poses", metavar="FILE.conf", help="initial/known poses of the views (Stanford .conf)")
+    parser.add_argument("--tol", type=float, required=True, help="tolerance in mm that the certificate bounds")
+    parser.add_argument("--statistic", choices=STATISTICS, default="p95",
+                        help="which deviation statistic --tol bounds (default p95: the max includes noise)")
+    parser.add_argument("-o", "--output", required=True, metavar="part.rgm", help="the .rgm file to write")
+    parser.add_argument("--report", metavar="fit.json", help="also write a JSON report with stage timings")
+    parser.add_argument("--scale", type=float, default=1.0,
+                        help="multiply scan coordinates by this to get mm (1000 for scans in metres)")
+    parser.add_argument("--register", action="store_true", help="register the views (ICP) before fitting")
+    parser.add_argument("--name", default=None, help="binding name of the part (default: the output's stem)")
+    parser.add_argument("--force", action="store_true", help="overwrite existing output files")
+
+
+def _fail(message: str) -> int:
+    print(f"rgmc fit: error: {message}", file=sys.stderr)
+    return 1
+
+
+def run(args) -> int:
+    from rgm.atomic import OutputExists, write_atomic
+    from rgm.errors import RgmError
+
+    out = Path(args.output)
+    outputs = [out] + ([Path(args.report)] if args.report else [])
+    inputs = {Path(v).resolve() for v in args.views} | ({Path(args.poses).resolve()} if args.poses else set())
+    for path in outputs:
+        if path.resolve() in inputs:
+            return _fail(f"{path} is an input; refusing to overwrite it")
+        if path.exists() and not args.force:
+            return _fail(f"{path} exists; pass --force to overwrite it")
+    if not args.tol > 0:
+        return _fail(f"--tol must be a positive length in mm, got {args.tol}")
+    if not args.scale > 0:
+        return _fail(f"--scale must be positive, got {args.scale}")
+    name = args.name or (out.stem if out.stem.isidentifier() else "part")
+    try:
+        from rgm.fitters.pipeline import fit_scans
+
+        result = fit_scans(args.views, tol=args.tol, poses=args.poses, statistic=args.statistic,
+                           register=args.register, scale=args.scale, title=name)
+    except (RgmError, ValueError, OSError) as exc:
+        return _fail(str(exc))
+    problems = _check_text(result.text, str(out))
+    if problems:
+        return _fail("internal error: the generated .rgm does not check:\n" + problems)
+    try:
+        write_atomic(out, result.text, overwrite=True)
+        if args.report:
+            write_atomic(args.report, json.dumps(result.report, indent=2, default=float) + "\n", overwrite=True)
+    except (OutputExists, OSError) as exc:
+        return _fail(str(exc))
+    for part in result.report["parts"]:
+        line = f"{part['name']}: {part['category']} (confidence {part['confidence']:.2f}, runner-up {part['runner_up']})"
+        if part.get("modelled"):
+            cert = part["certificate"]
+            dims = ", ".join(f"{k} = {v:.4f} mm" for k, v in part["params"].items())
+            state = "holds" if cert["holds"] else "DOES NOT HOLD"
+            line += f"; {dims}; {cert['statistic']} {cert[cert['statistic']]:.4f} mm <= tol {cert['tol']:g}: {state}"
+        print(line, file=sys.stderr)
+    for note in result.report["notes"]:
+        print(f"rgmc fit: note: {note}", file=sys.stderr)
+    print(f"wrote {out}", file=sys.stderr)
+    return 0 if result.parts else 1
+
+
+def _check_text(text: str, filename: str) -> str:
+    """'' when the text parses and type-checks, else the rendered diagnostics."""
+    from rgm.compiler.check import check
+    from rgm.compiler.diagnostics import render
+    from rgm.compiler.parser import parse
+
+    program, diagnostics = parse(text, filename)
+    errors = [d for d in diagnostics if d.is_error]
+    if program is not None and not errors:
+        errors = [d for d in check(program).diagnostics if d.is_error]
+    return "\n".join(render(d, {filename: text}) for d in errors)

@@ -1,0 +1,102 @@
+"""`rgmc verify part.rgm VIEW... [--poses FILE] [--scale S]`: re-measure a model against its scans.
+
+The file is compiled (parse, check, evaluate: `rgm.loads`); every binding annotated with `@fit` is
+turned into a measurable shape (`rgm.fitters.certificate.shape_from_model`), the scans are read and
+filtered as `rgmc fit` does, each point is given to the nearest annotated part, and the certificate is
+measured again with the tolerance and statistic written in the annotation.  Exit codes: 0 every
+certificate holds, 1 one does not (after a hand edit, say) or the input is bad, 2 usage.
+"""
+from __future__ import annotations
+
+import os
+
+# the fitters solve many small least-squares problems: BLAS threads only add synchronisation (and are
+# pathological on busy machines), so a fresh `rgmc fit`/`verify` process runs BLAS single-threaded
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import sys
+
+#: length units of annotation literals, in mm (rgmc fit writes mm)
+_MM = {None: 1.0, "mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4, "um": 1e-3}
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("model", metavar="part.rgm", help="the .rgm file written by rgmc fit (maybe edited)")
+    parser.add_argument("views", nargs="+", metavar="VIEW", help="the scans it was fitted to")
+    parser.add_argument("--poses", metavar="FILE.conf", help="poses of the views (Stanford .conf)")
+    parser.add_argument("--scale", type=float, default=1.0, help="multiply scan coordinates by this to get mm")
+
+
+def _fail(message: str) -> int:
+    print(f"rgmc verify: error: {message}", file=sys.stderr)
+    return 1
+
+
+def _fit_annotations(program) -> dict:
+    """binding name -> {"tol": mm, "statistic": str} from its `@fit` annotation."""
+    from rgm.compiler import ast as A
+
+    out = {}
+    for stmt in program.statements:
+        if not isinstance(stmt, A.Binding):
+            continue
+        for ann in stmt.annotations:
+            if ann.name != "fit":
+                continue
+            tol, stat = ann.arg("tol"), ann.arg("statistic")
+            if not isinstance(tol, A.Number):
+                continue
+            out[stmt.name] = {"tol": tol.value * _MM.get(tol.unit, 1.0),
+                              "statistic": stat.value if isinstance(stat, A.String) else "max"}
+    return out
+
+
+def run(args) -> int:
+    import numpy as np
+
+    import rgm
+    from rgm.compiler.diagnostics import CompileError, render
+    from rgm.compiler.parser import parse
+    from rgm.errors import RgmError
+    from rgm.fitters.certificate import certify, shape_from_model
+
+    try:
+        text = open(args.model, encoding="utf-8").read()
+    except (OSError, UnicodeDecodeError) as exc:
+        return _fail(f"cannot read {args.model}: {exc}")
+    try:
+        model = rgm.loads(text, filename=args.model)
+    except CompileError as exc:
+        for d in exc.diagnostics:
+            print(render(d, {args.model: text}), file=sys.stderr)
+        return _fail(f"{args.model} does not compile")
+    claims = _fit_annotations(parse(text, args.model)[0])
+    if not claims:
+        return _fail(f"{args.model} has no @fit certificate to verify")
+    try:
+        shapes = {name: shape_from_model(model.objects[name]) for name in claims if name in model.objects}
+        from rgm.fitters.filters import statistical_outliers
+        from rgm.fitters.io import read_views
+
+        scans = read_views(args.views, args.poses)
+        points = np.vstack([s.world_points() for s in scans]) * args.scale
+        points = points[~statistical_outliers(points)]
+    except (RgmError, ValueError, OSError, KeyError) as exc:
+        return _fail(str(exc))
+    names = list(shapes)
+    dist = np.array([shapes[n].distance(points) for n in names])     # (parts, n)
+    owner = np.argmin(dist, axis=0)
+    failed = 0
+    for k, name in enumerate(names):
+        d = dist[k, owner == k]
+        if len(d) == 0:
+            print(f"{name}: no scan point lies nearest to it: FAILS", file=sys.stderr)
+            failed += 1
+            continue
+        cert = certify(d, claims[name]["tol"], statistic=claims[name]["statistic"])
+        state = "holds" if cert.holds else "FAILS"
+        print(f"{name}: {cert.points} points, max {cert.max:.4f} mm, rms {cert.rms:.4f} mm, p95 {cert.p95:.4f} mm; "
+              f"{cert.statistic} {cert.value:.4f} mm <= tol {cert.tol:g} mm: {state}", file=sys.stderr)
+        failed += not cert.holds
+    return 1 if failed else 0
