@@ -83,19 +83,28 @@ def corner_indices(poly: np.ndarray, window: int = 3, angle: float = np.deg2rad(
     return np.nonzero(peak & (turn > angle))[0]
 
 
+def _densify(poly: np.ndarray, per_edge: int = 4) -> np.ndarray:
+    """An open polyline (k, 2) with `per_edge` evenly spaced points on every edge (k-1) * per_edge + 1,
+    so that a least-squares fit has data in every knot span it may create."""
+    t = np.linspace(0.0, 1.0, per_edge, endpoint=False)
+    a, b = poly[:-1], poly[1:]
+    pts = (a[:, None, :] + (b - a)[:, None, :] * t[None, :, None]).reshape(-1, 2)
+    return np.vstack([pts, poly[-1:]])
+
+
 def fit_closed_loop(uv: np.ndarray, tol_uv: float, degree: int = 3) -> tuple[CurveFit, ...]:
     """Closed polygon (k, 2) -> consecutive B-spline pieces, split at corners (C0 there, smooth between),
     each refined by knot insertion to `tol_uv`; the pieces share their end points, so the loop closes."""
     corners = corner_indices(uv)
     if len(corners) == 0:
-        return (fit_curve(np.vstack([uv, uv[:1]]), tol_uv, degree=degree, fix_ends=True),)
+        return (fit_curve(_densify(np.vstack([uv, uv[:1]])), tol_uv, degree=degree, fix_ends=True),)
     rolled = np.roll(uv, -corners[0], axis=0)
     cuts = np.r_[corners - corners[0], len(uv)]
     pieces = []
     for a, b in zip(cuts[:-1], cuts[1:]):
         seg = rolled[a:b + 1] if b < len(uv) else np.vstack([rolled[a:], rolled[:1]])
         deg = min(degree, len(seg) - 1)
-        pieces.append(fit_curve(seg, tol_uv, degree=deg, fix_ends=True))
+        pieces.append(fit_curve(_densify(seg), tol_uv, degree=deg, fix_ends=True))
     return tuple(pieces)
 
 
@@ -121,12 +130,14 @@ def _to_uv(poly_px, u_of_row, v_of_col):
 
 
 def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_pixels: int = 20,
-                   degree: int = 3) -> TrimLoops:
+                   degree: int = 3, snap_to=None) -> TrimLoops:
     """Fit the boundary of `mask` (rows, cols) with closed B-spline loops in (u, v).
 
     u_of_row (rows,), v_of_col (cols,): the parameters of the grid rows and columns.
     tol_uv: the loops' tolerance in parameter units (a model tolerance divided by the surface's speed).
     Components smaller than `min_pixels` (speckle) are ignored; the largest component is the face.
+    snap_to: optional data parameters (k, 2); each contour vertex then moves to its nearest data point,
+    so a rasterised boundary follows the data rather than the raster's staircase.
     """
     mask = np.asarray(mask, bool)
     lab, count = ndimage.label(mask)
@@ -142,8 +153,17 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
     outer_i = int(np.argmax(np.abs(areas)))
     outer_sign = np.sign(areas[outer_i])
 
+    tree = None
+    if snap_to is not None:
+        from scipy.spatial import cKDTree
+
+        tree = cKDTree(np.asarray(snap_to, float))
+
     def fit(poly, want_ccw):
         uv = _to_uv(poly, np.asarray(u_of_row, float), np.asarray(v_of_col, float))
+        if tree is not None:
+            uv = tree.data[tree.query(uv)[1]]
+            uv = uv[np.r_[True, np.any(np.diff(uv, axis=0) != 0, axis=1)]]  # drop repeated vertices
         if (signed_area(uv) > 0) != want_ccw:
             uv = uv[::-1]
         return fit_closed_loop(uv, tol_uv, degree)
