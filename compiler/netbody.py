@@ -58,8 +58,9 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
     ragged = np.flatnonzero(counts != width)
     if ragged.size:
         k = int(ragged[0])
+        got = int(counts[k])
         a, b = _entry_range(body, entry_starts, k)
-        raise NetError(f"entry {k + 1} of this net has {counts[k]} number{'s' * (counts[k] != 1)}, "
+        raise NetError(f"entry {k + 1} of this net has {got} number{'s' * (got != 1)}, "
                        f"but the first entry has {width}", body_start + a, body_start + b,
                        "every entry has the same count: `x y z` for points, `x y z w` with weights")
     if width > MAX_WIDTH:

@@ -395,7 +395,7 @@ class _Run:
         if isinstance(e, UnexpectedToken):
             self.unexpected_token(e)
             try:   # a statement just completed (the error is on the next token): reduce it
-                e.interactive_parser.copy().feed_eof()
+                e.interactive_parser.feed_eof()   # not a copy: lark's deepcopy drops token end positions
             except (UnexpectedInput, AttributeError, AssertionError):
                 pass
             if e.token.type == "$END":
@@ -524,7 +524,7 @@ def _expected(terminals) -> str:
     if len(_EXPR_START & terms) >= 5:
         parts.append("an expression")
         terms -= _EXPR_START
-    if _OPERATORS <= terms:
+    if terms & _OPERATORS:
         terms -= _OPERATORS
         parts.append("an operator")
     order = ["SEMI", "DEFINE", "COMMA", "RPAR", "RSQB", "COLON", "LPAR", "LSQB", "DOT", "NAME", "NUMBER"]
