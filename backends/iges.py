@@ -123,7 +123,8 @@ class _Lowering:
             return add(self._bspline(branches[0].curve, 0, 3, use))
         if self.nurbs_only:
             form = 1 if isinstance(obj, Line) else 2 if isinstance(obj, (Circle, CircularArc)) else 0
-            return add(self._bspline(obj.nurbs(), form, dim, use))
+            nurbs = _joined(obj) if isinstance(obj, CompositeCurve) else obj.nurbs()
+            return add(self._bspline(nurbs, form, dim, use))
         if isinstance(obj, Line):
             return add(Entity(110, [self._points(np.stack([obj.p0, obj.p1])).ravel()], use=use))
         if isinstance(obj, Polyline):
@@ -247,6 +248,7 @@ class _Lowering:
         for loop in face.loops():
             for piece in loop.pieces:
                 c = self._loop_piece(piece, face.surface)[0]
+                c = c if hasattr(c, "ctrl") else c.nurbs()
                 ext = max(ext, float(np.abs(c.ctrl).max()))
         return 1.5 * ext
 
@@ -258,9 +260,12 @@ class _Lowering:
                 raise BackendError(f"the intersection{_of(piece)} has {len(branches)} branches; a loop piece "
                                    f"needs one")
             return piece.uv_curves(surface, self.tol)[0], branches[0].curve, 2
+        # the approximated partner curve is made far tighter than the file's tolerance, so that receivers
+        # that prefer it still get the exact geometry to ~1e-10 of the surface's size
+        ftol = min(self.tol, 1e-10 * _size(surface))
         if piece.dim == 2:
-            return piece, model_curve(surface, piece.nurbs(), self.tol), 0
-        return parameter_curve(surface, piece.nurbs(), self.tol), piece, 0
+            return piece, model_curve(surface, piece.nurbs(), ftol), 0
+        return parameter_curve(surface, piece.nurbs(), ftol), piece, 0
 
     def _loop(self, loop: Loop, surface, sde: int) -> int:
         """142: CRTN, SPTR, BPTR (2-D curve or 102 of them), CPTR (3-D), PREF."""
@@ -299,6 +304,27 @@ class _Lowering:
 
 def _of(obj) -> str:
     return f" `{obj.name}`" if getattr(obj, "name", None) else ""
+
+
+def _joined(curve):
+    """The single NURBS of a composite curve (pieces joined end to start, exact)."""
+    from rgm.geometry.revolve import composite_curve
+
+    pieces = [p.nurbs() for p in _flatten(curve)]
+    if curve.dim == 2:
+        from rgm.geometry import NurbsCurve
+
+        lifted = [NurbsCurve(c.degree, c.knots, np.column_stack([c.ctrl, np.zeros(c.n)]), c.weights) for c in pieces]
+        c = composite_curve(lifted)
+        return NurbsCurve(c.degree, c.knots, c.ctrl[:, :2], c.weights)
+    return composite_curve(pieces)
+
+
+def _size(surface) -> float:
+    """Largest extent of a surface's control net (1 for a plane), model units."""
+    if isinstance(surface, Plane):
+        return max(1.0, float(np.abs(surface.origin).max()))
+    return max(1.0, float(np.ptp(surface.nurbs().ctrl.reshape(-1, 3), axis=0).max()))
 
 
 def _flatten(curve) -> list:

@@ -17,22 +17,63 @@ from rgm.geometry import NurbsCurve
 from rgm.model import Plane
 
 
-def fit_parametric(func, breaks, tol: float, max_level: int = 8) -> NurbsCurve:
-    """Cubic B-spline interpolant of `func` (params (m,) -> points (m, d)) over the sorted `breaks`
-    (k,), the knots of the source curve, refined until within `tol` at the sample midpoints."""
-    breaks = np.unique(np.asarray(breaks, dtype=float))
+def _fit_span(func, a: float, b: float, tol: float, max_level: int):
+    """(knots, coefficients) of a clamped cubic interpolant of func on [a, b] within tol."""
+    from scipy.interpolate import make_interp_spline
+
     err = np.inf
     for level in range(max_level + 1):
-        per = 4 << level
-        t = np.unique(np.concatenate([np.linspace(a, b, per + 1) for a, b in zip(breaks[:-1], breaks[1:])]))
-        from scipy.interpolate import make_interp_spline
-
+        t = np.linspace(a, b, (4 << level) + 1)
         spl = make_interp_spline(t, func(t), k=3)
         mid = 0.5 * (t[:-1] + t[1:])
         err = float(np.linalg.norm(spl(mid) - func(mid), axis=1).max())
         if err <= tol:
-            return NurbsCurve(3, spl.t, spl.c, None)
+            return spl.t, spl.c
     raise BackendError(f"could not approximate a curve on a surface within {tol:g} (best {err:.3g})")
+
+
+def fit_parametric(func, breaks, tol: float, max_level: int = 9) -> NurbsCurve:
+    """Cubic B-spline interpolant of `func` (params (m,) -> points (m, d)) with the parameter of its
+    source: each interval between the sorted `breaks` (k,) (the source's knots and the parameters
+    where it crosses the surface's knot lines, where the image may have a kink) is interpolated on
+    its own, doubling the samples until within `tol` at their midpoints, and the pieces are joined
+    with knots of multiplicity 3 (C0) at the breaks."""
+    breaks = np.unique(np.asarray(breaks, dtype=float))
+    knots, coef = [], []
+    for a, b in zip(breaks[:-1], breaks[1:]):
+        t, c = _fit_span(func, a, b, tol, max_level)
+        if knots:
+            knots[-1] = knots[-1][:-1]
+            t, c = t[4:], c[1:]
+        knots.append(t)
+        coef.append(c)
+    return NurbsCurve(3, np.concatenate(knots), np.concatenate(coef), None)
+
+
+def _crossings(uv: NurbsCurve, surface, count: int = 512) -> np.ndarray:
+    """Parameters (k,) where the 2-D curve `uv` crosses an interior knot line of `surface`'s NURBS form
+    (located by sampling, then 50 vectorised bisection steps)."""
+    nurbs = surface.nurbs()
+    lines = [np.unique(nurbs.knots_u[nurbs.degree_u + 1:nurbs.nu]), np.unique(nurbs.knots_v[nurbs.degree_v + 1:nurbs.nv])]
+    t = np.linspace(*uv.domain, count)
+    p = uv.evaluate(t)
+    out = []
+    for axis, knots in enumerate(lines):
+        if knots.size == 0:
+            continue
+        span = np.searchsorted(knots, p[:, axis], side="right")
+        for i in np.flatnonzero(np.diff(span)):
+            lo, hi = t[i], t[i + 1]
+            target = knots[min(span[i], span[i + 1])]
+            below = p[i, axis] < target
+            for _ in range(50):
+                mid = 0.5 * (lo + hi)
+                if (uv.evaluate([mid])[0, axis] < target) == below:
+                    lo = mid
+                else:
+                    hi = mid
+            out.append(0.5 * (lo + hi))
+    return np.array(out)
 
 
 def surface_points(surface, u, v) -> np.ndarray:
@@ -58,7 +99,7 @@ def model_curve(surface, uv: NurbsCurve, tol: float) -> NurbsCurve:
         p = uv.evaluate(t)
         return surface_points(surface, p[:, 0], p[:, 1])
 
-    return fit_parametric(func, _knot_breaks(uv), tol)
+    return fit_parametric(func, np.concatenate([_knot_breaks(uv), _crossings(uv, surface)]), tol)
 
 
 def parameter_curve(surface, curve: NurbsCurve, tol: float) -> NurbsCurve:

@@ -9,15 +9,19 @@ from __future__ import annotations
 import numpy as np
 
 from rgm.errors import BackendError
-from rgm.model import Curve, IntersectionCurve, Plane, Shell, Surface, TrimmedFace
+from rgm.model import CompositeCurve, Curve, IntersectionCurve, Plane, Shell, Surface, TrimmedFace
 
 from .iges_curves import surface_points
 from .iges_read import read_iges_file
 
 __all__ = ["verify_iges", "sample_object"]
 
+_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+
 
 def _curve_points(curve, tol, surface=None, count: int = 17) -> np.ndarray:
+    if isinstance(curve, CompositeCurve):  # piece by piece (the joined form may be reparametrised)
+        return np.concatenate([_curve_points(p, tol, surface, count) for p in curve.pieces])
     nurbs = curve.nurbs(tol) if isinstance(curve, IntersectionCurve) else curve.nurbs()
     t = np.linspace(*nurbs.domain, count)
     p = nurbs.evaluate(t)
@@ -82,8 +86,14 @@ def verify_iges(model, path, *, tol: float | None = None) -> dict:
         raise BackendError(f"{path}: OpenCASCADE reports: {'; '.join(occ.fails) or 'no shape'}")
     if occ.transferred < occ.roots:
         raise BackendError(f"{path}: OpenCASCADE transferred {occ.transferred} of {occ.roots} roots")
-    pts = np.concatenate([sample_object(o, tol, 5) for o in model.exported()])
-    occ_dev = float(distances_to_shape(pts, occ.shape).max()) if len(pts) else 0.0
+    from rgm.backends.mesh import face_samples
+
+    objs = model.exported()
+    parts = [sample_object(o, tol, 5) for o in objs if isinstance(o, Curve)]
+    if any(not isinstance(o, Curve) for o in objs):  # trimmed faces: points inside the trim only
+        parts.append(face_samples([o for o in objs if not isinstance(o, Curve)], 30)[0])
+    pts = np.concatenate(parts) * _MM.get(model.units, 1.0)   # OpenCASCADE reads IGES in mm
+    occ_dev = float(distances_to_shape(pts, occ.shape).max()) / _MM.get(model.units, 1.0)
     if not occ_dev <= tol:
         raise BackendError(f"{path}: read back by OpenCASCADE, the file deviates {occ_dev:.3g} from the "
                            f"model (tolerance {tol:g})")
