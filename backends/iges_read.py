@@ -46,6 +46,7 @@ class IgesImport:
     model: Model
     unsupported: list = field(default_factory=list)   # (type, form, DE) of unsupported entities
     problems: list = field(default_factory=list)      # "entity ... at DE n: reason"
+    notes: list = field(default_factory=list)         # adjustments made (e.g. a looser tolerance)
 
     @property
     def ok(self) -> bool:
@@ -54,7 +55,7 @@ class IgesImport:
     def messages(self) -> list[str]:
         """One line per unsupported entity and per invalid entity."""
         out = [f"unsupported IGES entity {t} (form {f}) at DE {de}" for t, f, de in self.unsupported]
-        return out + self.problems
+        return out + self.problems + self.notes
 
 
 class _Reader:
@@ -393,9 +394,36 @@ def read_iges(text: str, source: str | None = None) -> IgesImport:
         m = np.diag([_TO_MM[units]] * 3 + [1.0])
         objects = {k: v.transform(m) for k, v in objects.items()}
         units, reader.tol = "mm", reader.tol * _TO_MM[units]
+    notes = []
+    gap = _loop_gap(objects.values())
+    if gap > reader.tol:
+        notes.append(f"model-space trimming curves lie up to {gap:.3g} from their surfaces, more than the "
+                     f"file's resolution {reader.tol:g}; the model tolerance is set to {1.5 * gap:.3g}")
+        reader.tol = 1.5 * gap
     model = Model(units, reader.tol, objects, tuple(exports), {}, source)
     return IgesImport(model, sorted(reader.unsupported.values(), key=lambda t: t[2]),
-                      [reader.problems[k] for k in sorted(reader.problems)])
+                      [reader.problems[k] for k in sorted(reader.problems)], notes)
+
+
+def _loop_gap(objects) -> float:
+    """Largest distance (model units) from a model-space loop piece to its face's surface (9 samples
+    per piece), over the trimmed faces among `objects` (shells included)."""
+    gap = 0.0
+    for obj in objects:
+        faces = obj.faces if isinstance(obj, Shell) else [obj]
+        for face in faces:
+            if not isinstance(face, TrimmedFace) or isinstance(face.surface, Plane):
+                continue
+            for loop in face.loops():
+                for piece in loop.pieces:
+                    if piece.dim != 3:
+                        continue
+                    pieces = piece.pieces if isinstance(piece, CompositeCurve) else (piece,)
+                    for p in pieces:
+                        c = p.nurbs()
+                        pts = c.evaluate(np.linspace(*c.domain, 9))
+                        gap = max(gap, float(face.surface.nurbs().closest_point(pts)[3].max()))
+    return gap
 
 
 def read_iges_file(path) -> IgesImport:
