@@ -15,12 +15,17 @@ caller re-parses with lark's own parser, whose interactive state the recovery ne
 from __future__ import annotations
 
 import re
+from bisect import bisect_right
 
 from lark import Lark
 from lark.parsers.lalr_analysis import Shift
 
 # master regex order: first match wins, so longer/higher-priority forms come first
-_ORDER = ("NET", "WS", "COMMENT", "NUMBER", "STRING", "ANNOTATION", "NAME", "DEFINE")
+_ORDER = ("NET", "COMMENT", "NUMBER", "STRING", "ANNOTATION", "NAME", "DEFINE")
+_BLANK = "[ \t\f\r\n]"
+
+
+_NEWLINE = re.compile("\n")
 
 
 class Tok:
@@ -54,10 +59,17 @@ class FastLALR:
         name_re = re.compile(terms["NAME"].pattern.to_regexp())
         self.keywords = {str(t.pattern.value): str(t.name) for t in terms.values()
                          if t.pattern.type == "str" and name_re.fullmatch(t.pattern.value)}
-        rest = sorted((n for n in terms if n not in _ORDER and n not in self.keywords.values()),
+        rest = sorted((n for n in terms if n not in _ORDER + ("WS",) and n not in self.keywords.values()),
                       key=lambda n: -len(terms[n].pattern.value))
         groups = [f"(?P<{n}>{terms[n].pattern.to_regexp()})" for n in _ORDER + tuple(rest)]
-        self.master = re.compile("|".join(groups + ["(?P<_ERROR>.)"]), re.DOTALL)
+        # blanks are skipped as each token's prefix; any other character matches _ERROR, so nothing
+        # is passed over silently (trailing blanks simply end the iteration)
+        self.master = re.compile(f"{_BLANK}*(?:" + "|".join(groups + [f"(?P<_ERROR>(?!{_BLANK}).)"]) + ")",
+                                 re.DOTALL)
+        # punctuation that no rule keeps (`(`, `,`, `:`, `.`) needs no token object
+        kept = {sym.name for rule in frontend.callbacks for sym in rule.expansion
+                if sym.is_term and not sym.filter_out}
+        self.dropped = frozenset(n for n in terms if n not in kept and n not in ("COMMENT", "WS"))
         reducers = {rule: self._reducer(rule, builder) for rule in frontend.callbacks}
         # state -> {symbol: shift/goto target (int) | reducer (size, origin, function)}
         self.actions = [None] * (max(self.states) + 1)
@@ -105,11 +117,12 @@ class FastLALR:
 
     def parse(self, text: str, on_comment) -> bool:
         """Parse `text`, calling the builder as lark would; False at the first error (nothing is
-        undone: the caller discards what was built and re-parses with lark)."""
-        actions, keywords, end_state = self.actions, self.keywords, self.end_state
+        undone: the caller discards what was built and re-parses with lark). Lines and columns come
+        from a bisection in the list of newline offsets."""
+        actions, keywords, end_state, dropped = self.actions, self.keywords, self.end_state, self.dropped
+        newlines = [m.start() for m in _NEWLINE.finditer(text)]
         state_stack = [self.start_state]
         values: list = []
-        line, line_start = 1, 0
         tokens = self.master.finditer(text)
         while True:
             m = next(tokens, None)
@@ -117,30 +130,26 @@ class FastLALR:
                 tok, kind = None, "$END"
             else:
                 kind = m.lastgroup
-                start, end = m.span()
-                if kind == "WS":
-                    nl = text.count("\n", start, end)
-                    if nl:
-                        line += nl
-                        line_start = text.rfind("\n", start, end) + 1
-                    continue
-                value = m.group()
-                if kind == "COMMENT":
-                    on_comment(Tok(kind, value, start, end, line, start - line_start + 1, line,
-                                   end - line_start + 1))
-                    continue
-                if kind == "_ERROR":
-                    return False
-                if kind == "NAME" and value in keywords and keywords[value] in actions[state_stack[-1]]:
-                    kind = keywords[value]
-                col = start - line_start + 1
-                if kind == "NET" and "\n" in value:
-                    end_line = line + value.count("\n")
-                    end_col = end - (text.rfind("\n", start, end) + 1) + 1
-                    tok = Tok(kind, value, start, end, line, col, end_line, end_col)
-                    line, line_start = end_line, end - end_col + 1
+                if kind in dropped:
+                    tok = None
                 else:
-                    tok = Tok(kind, value, start, end, line, col, line, col + end - start)
+                    start, end = m.span(kind)
+                    if kind == "_ERROR":
+                        return False
+                    value = m.group(kind)
+                    line = bisect_right(newlines, start)
+                    col = start - (newlines[line - 1] if line else -1)
+                    if kind == "NET":
+                        end_line = bisect_right(newlines, end - 1)
+                        end_col = end - (newlines[end_line - 1] if end_line else -1)
+                        tok = Tok(kind, value, start, end, line + 1, col, end_line + 1, end_col)
+                    else:
+                        tok = Tok(kind, value, start, end, line + 1, col, line + 1, col + end - start)
+                    if kind == "COMMENT":
+                        on_comment(tok)
+                        continue
+                    if kind == "NAME" and value in keywords and keywords[value] in actions[state_stack[-1]]:
+                        kind = tok.type = keywords[value]
             while True:     # reduce while the table says so, then shift
                 action = actions[state_stack[-1]].get(kind)
                 if action is None:
