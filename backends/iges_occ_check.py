@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["OccIges", "occ_read_iges", "occ_write_iges"]
+__all__ = ["OccIges", "occ_read_iges", "occ_write_iges", "sample_shape"]
 
 
 @dataclass
@@ -38,14 +38,8 @@ def _messages(check_list) -> list[str]:
 def occ_read_iges(path, samples: int = 7) -> OccIges:
     """Read `path` with IGESControl_Reader, transfer every root, and sample each face (a
     samples x samples grid over its UV bounds) and edge (samples points over its range)."""
-    from OCP.BRep import BRep_Tool
-    from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
-    from OCP.BRepTools import BRepTools
     from OCP.IFSelect import IFSelect_RetDone
     from OCP.IGESControl import IGESControl_Reader
-    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_WIRE
-    from OCP.TopExp import TopExp_Explorer
-    from OCP.TopoDS import TopoDS
 
     from rgm.backends.occ import _quiet
 
@@ -69,6 +63,34 @@ def occ_read_iges(path, samples: int = 7) -> OccIges:
     except AttributeError:
         pass
     shape = reader.OneShape()
+    faces, edges = sample_shape(shape, samples)
+    return OccIges(shape, roots, transferred, fails, faces, edges)
+
+
+def occ_write_iges(shapes, path, units: str = "MM", brep_mode: int = 0) -> None:
+    """Write TopoDS shapes with IGESControl_Writer (Faces mode by default), for tests and benchmarks."""
+    from OCP.IGESControl import IGESControl_Writer
+    from OCP.Interface import Interface_Static
+
+    Interface_Static.SetIVal_s("write.iges.brep.mode", brep_mode)
+    writer = IGESControl_Writer(units, brep_mode)
+    for s in shapes:
+        writer.AddShape(s)
+    writer.ComputeModel()
+    if not writer.Write(str(path)):
+        raise OSError(f"OpenCASCADE could not write {path}")
+
+
+def sample_shape(shape, samples: int = 7):
+    """(faces, edges) of a TopoDS shape: per face (surface type, wire count, points (k, 3) on a
+    samples x samples grid over its UV bounds, the (u, v) (k, 2)); per edge points (samples, 3)."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
+    from OCP.BRepTools import BRepTools
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_WIRE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
     faces, edges = [], []
     exp = TopExp_Explorer(shape, TopAbs_FACE)
     while exp.More():
@@ -96,18 +118,4 @@ def occ_read_iges(path, samples: int = 7) -> OccIges:
         ts = np.linspace(curve.FirstParameter(), curve.LastParameter(), samples)
         edges.append(np.array([[p.X(), p.Y(), p.Z()] for p in (curve.Value(t) for t in ts)]))
         exp.Next()
-    return OccIges(shape, roots, transferred, fails, faces, edges)
-
-
-def occ_write_iges(shapes, path, units: str = "MM", brep_mode: int = 0) -> None:
-    """Write TopoDS shapes with IGESControl_Writer (Faces mode by default), for tests and benchmarks."""
-    from OCP.IGESControl import IGESControl_Writer
-    from OCP.Interface import Interface_Static
-
-    Interface_Static.SetIVal_s("write.iges.brep.mode", brep_mode)
-    writer = IGESControl_Writer(units, brep_mode)
-    for s in shapes:
-        writer.AddShape(s)
-    writer.ComputeModel()
-    if not writer.Write(str(path)):
-        raise OSError(f"OpenCASCADE could not write {path}")
+    return faces, edges

@@ -29,7 +29,7 @@ from .iges_format import IgesData, IgesFormatError, parse_iges
 
 __all__ = ["IgesImport", "read_iges", "read_iges_file", "SUPPORTED"]
 
-SUPPORTED = {0, 100, 102, 106, 110, 116, 120, 124, 126, 128, 142, 144, 314, 402, 406}
+SUPPORTED = {0, 100, 102, 106, 108, 110, 116, 120, 124, 126, 128, 142, 144, 314, 402, 406}
 _NOT_OBJECTS = {0, 124, 314, 406}
 #: unit lengths in mm of IGES units the language does not have (converted to mm on import)
 _TO_MM = {"ft": 304.8, "mi": 1609344.0, "km": 1e6, "mil": 0.0254, "um": 1e-3, "uin": 2.54e-5}
@@ -255,6 +255,21 @@ class _Reader:
                 return plane
         return BSplineSurface(s)
 
+    def _e108(self, de, dim):
+        """Unbounded plane (form 0) A x + B y + C z = D, origin at the display point's projection."""
+        e = self.d.entries[de]
+        if e.form != 0:
+            self.unsupported[de] = (108, e.form, de)
+            raise _Skip
+        a, b, c, dd = self.d.reals(de, 1, 4)
+        n = np.array([a, b, c])
+        nn = float(n @ n)
+        if not nn > 0:
+            raise GeometryError("plane with a zero normal")
+        p = np.array([self.d.real(de, 6), self.d.real(de, 7), self.d.real(de, 8)])
+        origin = p - ((n @ p - dd) / nn) * n
+        return Plane(origin, n)
+
     def _e120(self, de, dim):
         axis_de, gen_de = self.d.ints(de, 1, 2)
         sa, ta = self.d.real(de, 3), self.d.real(de, 4)
@@ -375,7 +390,7 @@ def read_iges(text: str, source: str | None = None) -> IgesImport:
     objects: dict = {}
     exports = []
     kinds = {100: "curve", 102: "curve", 106: "curve", 110: "curve", 126: "curve", 142: "curve", 116: "point",
-             120: "surface", 128: "surface", 144: "face", 402: "shell"}
+             108: "plane", 120: "surface", 128: "surface", 144: "face", 402: "shell"}
     for de in reader.roots():
         e = data.entries[de]
         try:
