@@ -3,9 +3,10 @@
 The lexer hands the whole net over as a single token; this module checks and converts its body with
 a few vectorised passes over the characters (no Python loop per number), so a 1000 x 1000 control net
 of 30 MB costs about one `str.split` plus one float conversion:
-  1. a regex finds any character that is not a digit, sign, point, exponent, space or comma;
-  2. on the body's bytes, token starts (a non-separator after a separator) are counted per entry
-     (entries are separated by commas) with np.bincount: every entry must hold the same count `width`;
+  1. a 256-entry lookup table classifies every byte of the body (number character, comma, blank,
+     anything else: an error);
+  2. number starts (a number character after a non-number one) are counted per entry (entries are
+     separated by commas) with np.bincount: every entry must hold the same count `width`;
   3. the numbers are converted by numpy (`np.array(body.replace(',', ' ').split(), float)`).
 Errors come back as `NetError(message, start, end, hint)` with offsets into the token text.
 """
@@ -17,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 _HEAD = re.compile(r"net\s+([0-9]+)(?:\s*x\s*([0-9]+))?\s*\[")
-_BAD_CHAR = re.compile(r"[^0-9eE+\-.,\s]")
+_BAD_CHAR = re.compile(r"[^0-9eE+\-.,\t\n\r\f\v ]")
 _TOKEN = re.compile(r"[^\s,]+")
 MAX_WIDTH = 4
 
@@ -42,16 +43,19 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
     if 0 in shape or max(shape) > 10**8:
         raise NetError(f"a net needs between 1 and 10^8 rows and columns, not `{' x '.join(map(str, shape))}`",
                        0, head.end() - 1)
-    bad = _BAD_CHAR.search(body)
-    if bad:
+    codes = _classify(body)
+    bad_at = int(np.argmax(codes == _BAD)) if (codes == _BAD).any() else -1
+    if bad_at >= 0:
+        bad = _BAD_CHAR.search(body)           # the character (not byte) offset, for the message
         ch = bad.group()
         at = body_start + bad.start()
         if ch == "#":
             raise NetError("a comment cannot go inside a net", at, at + 1,
                            "put the comment on the line before the binding")
-        raise NetError(f"`{ch}` cannot appear in a net: only numbers separated by spaces, and commas between "
-                       "entries", at, at + 1, "write each entry as `x y z` and separate entries with `,`")
-    counts, entry_starts = _entry_counts(body)
+        shown = ch if ch.isprintable() else f"U+{ord(ch):04X}"
+        raise NetError(f"`{shown}` cannot appear in a net: only numbers separated by spaces, and commas "
+                       "between entries", at, at + 1, "write each entry as `x y z` and separate entries with `,`")
+    counts, entry_starts = _entry_counts(codes)
     if counts.size == 0 or not counts.any():
         raise NetError("this net holds no numbers", 0, len(text), "write entries such as `[0 0 0, 1 0 0]`")
     width = int(counts[0])
@@ -90,14 +94,27 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
     return shape, width, data
 
 
-def _entry_counts(body: str) -> tuple[np.ndarray, np.ndarray]:
-    """Numbers per entry (a trailing comma is allowed) and the byte offset where each entry begins."""
-    b = np.frombuffer(body.encode("ascii"), dtype=np.uint8)
-    comma = b == 44
-    number = ~((b <= 32) | comma)
+_BAD, _NUMBER, _COMMA, _BLANK = 0, 1, 2, 3
+_CLASSES = np.zeros(256, dtype=np.uint8)
+_CLASSES[np.frombuffer(b"0123456789eE+-.", dtype=np.uint8)] = _NUMBER
+_CLASSES[ord(",")] = _COMMA
+_CLASSES[np.frombuffer(b" \t\n\r\f\v", dtype=np.uint8)] = _BLANK
+
+
+def _classify(body: str) -> np.ndarray:
+    """One class per byte of the body (number character, comma, blank, or anything else), by a
+    256-entry lookup table: a single vectorised pass instead of one regex scan per question."""
+    return _CLASSES[np.frombuffer(body.encode("utf-8", errors="replace"), dtype=np.uint8)]
+
+
+def _entry_counts(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Numbers per entry (a trailing comma is allowed) and the byte offset where each entry begins.
+    Valid bodies are ASCII, so byte offsets are character offsets."""
+    comma = codes == _COMMA
+    number = codes == _NUMBER
     starts = np.flatnonzero(number & ~np.concatenate(([False], number[:-1])))
     entry = np.cumsum(comma)
-    counts = np.bincount(entry[starts], minlength=int(comma.sum()) + 1)
+    counts = np.bincount(entry[starts], minlength=int(entry[-1]) + 1 if entry.size else 1)
     entry_starts = np.concatenate(([0], np.flatnonzero(comma) + 1))
     if counts.size > 1 and counts[-1] == 0:
         counts, entry_starts = counts[:-1], entry_starts[:-1]
