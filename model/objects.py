@@ -395,7 +395,7 @@ class CompositeCurve(Curve):
 
     @cached_property
     def _nurbs(self):
-        from rgm.geometry.conics import composite_curve
+        from rgm.geometry.revolve import composite_curve
 
         if self.dim == 3:
             return composite_curve([p.nurbs() for p in self.pieces])
