@@ -1,6 +1,7 @@
 """`.rgm` text -> typed AST (rgm.compiler.ast) plus syntax diagnostics; never raises.
 
-The grammar (grammar/rgm.lark) is parsed by lark's LALR(1) parser with the contextual lexer; the AST
+The grammar (grammar/rgm.lark) is parsed by lark's LALR(1) parser with the contextual lexer (its tables
+cached on disk by lark's `cache=True`, so a new process builds the parser in milliseconds); the AST
 is built *during* parsing (lark's `transformer=` option), so no parse tree is ever materialised, and a
 dense control net is one token handed to numpy (rgm.compiler.netbody).
 
@@ -225,7 +226,7 @@ def lark_parser() -> Lark:
     global _PARSER
     if _PARSER is None:
         _PARSER = Lark(GRAMMAR_PATH.read_text(encoding="utf-8"), parser="lalr", lexer="contextual",
-                       transformer=_BUILDER, maybe_placeholders=False, cache=False,
+                       transformer=_BUILDER, maybe_placeholders=False, cache=True,
                        lexer_callbacks={"COMMENT": _on_comment})
     return _PARSER
 
