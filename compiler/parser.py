@@ -1,9 +1,12 @@
 """`.rgm` text -> typed AST (rgm.compiler.ast) plus syntax diagnostics; never raises.
 
-The grammar (grammar/rgm.lark) is parsed by lark's LALR(1) parser with the contextual lexer (its tables
-cached on disk by lark's `cache=True`, so a new process builds the parser in milliseconds); the AST
-is built *during* parsing (lark's `transformer=` option), so no parse tree is ever materialised, and a
-dense control net is one token handed to numpy (rgm.compiler.netbody).
+The grammar (grammar/rgm.lark) is compiled by lark into LALR(1) tables (cached on disk by lark's
+`cache=True`, so a new process builds the parser in milliseconds). The AST is built *during* parsing
+by the callbacks of `_Builder`, so no parse tree is ever materialised, and a dense control net is one
+token handed to numpy (rgm.compiler.netbody). Valid text goes through a tight driver over lark's
+table (rgm.compiler.lalr, about twice as fast as lark's loop); text with a syntax error is parsed
+again by lark's own LALR parser with the contextual lexer (`transformer=` the same builder), whose
+interactive state the recovery below needs. Both build identical trees (tested).
 
 Error recovery, so that one run reports several mistakes:
   * a missing `;` at the end of a line is reported (E0005) and inserted, and parsing goes on;
