@@ -144,14 +144,15 @@ def _edges_of(curve, tol):
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.gp import gp_Ax2, gp_Circ
 
-    from rgm.model import Circle, CircularArc, CompositeCurve, IntersectionCurve, Line, Polyline
+    from rgm.model import BSplineCurve, Circle, CircularArc, CompositeCurve, IntersectionCurve, Line, Polyline
 
     if curve.dim != 3:
         raise BackendError(f"{_label(curve)} is a parameter-space curve; only 3-D curves have a shape of their own")
     if isinstance(curve, Line):
         return [BRepBuilderAPI_MakeEdge(_pnt(curve.p0), _pnt(curve.p1)).Edge()]
-    if isinstance(curve, Polyline):
-        pts = curve.points
+    if isinstance(curve, Polyline) or (isinstance(curve, BSplineCurve) and curve.curve.degree == 1
+                                       and not curve.curve.is_rational):
+        pts = curve.points if isinstance(curve, Polyline) else np.asarray(curve.curve.ctrl)
         return [BRepBuilderAPI_MakeEdge(_pnt(a), _pnt(b)).Edge() for a, b in zip(pts[:-1], pts[1:])
                 if np.linalg.norm(b - a) > PRECISION]
     if isinstance(curve, Circle):
@@ -220,8 +221,9 @@ def _geom2d_pieces(curve):
 
     if isinstance(curve, Line):
         return [segment(curve.p0, curve.p1)]
-    if isinstance(curve, Polyline):
-        pts = curve.points
+    if isinstance(curve, Polyline) or (isinstance(curve, BSplineCurve) and curve.curve.degree == 1
+                                       and not curve.curve.is_rational):
+        pts = curve.points if isinstance(curve, Polyline) else np.asarray(curve.curve.ctrl)
         return [segment(a, b) for a, b in zip(pts[:-1], pts[1:]) if np.linalg.norm(b - a) > 0]
     if isinstance(curve, (Circle, CircularArc)):
         x = np.array([1.0, 0.0]) if isinstance(curve, Circle) else curve.frame[0][:2]

@@ -1,0 +1,183 @@
+"""Surfaces as the mesher sees them: point and first-derivative evaluation over a parameter rectangle,
+plus vectorised closest points (the oracle for chordal deviation).
+
+`surface_patch(surface)` adapts a model surface:
+- a bare `Revolution` is parameterised by (angle, profile parameter): S(u, v) = a + R_u (C(v) - a), so
+  equal steps in u are equal angles (the rational NURBS circle is not uniform in angle);
+- a `Plane` by its plane coordinates over a given box;
+- every other surface (and every surface carrying trimming curves, which live in rgm's (u, v)) by its
+  exact `.nurbs()` form.
+
+`Patch.project(points, uv0)` is Gauss-Newton on |S(u, v) - X|^2 from a starting guess (Piegl & Tiller
+§6.1, point inversion), clamped to the domain; `Patch.closest(points)` first picks the nearest node of a
+dense parameter grid (KD-tree) as the guess, so it finds the global closest point for points near the
+surface (within the grid spacing of it).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class Patch:
+    """A parametric surface over `domain` ((u0, u1), (v0, v1)) with `breaks_u`/`breaks_v` (knots: the
+    derivative may jump there). Subclasses give `d1(u, v) -> (S, Su, Sv)`, each (m, 3)."""
+
+    domain: tuple
+    breaks_u: np.ndarray
+    breaks_v: np.ndarray
+
+    creases_u = creases_v = np.zeros(0)
+
+    def d1(self, u, v):
+        raise NotImplementedError
+
+    def restrict(self, domain) -> "Patch":
+        """The same surface over a sub-rectangle `domain` (closest points then stay inside it)."""
+        import copy
+
+        sub = copy.copy(self)
+        sub.domain = tuple(tuple(map(float, d)) for d in domain)
+        (u0, u1), (v0, v1) = sub.domain
+        sub.breaks_u = np.unique(np.concatenate([[u0, u1], self.breaks_u[(self.breaks_u > u0) & (self.breaks_u < u1)]]))
+        sub.breaks_v = np.unique(np.concatenate([[v0, v1], self.breaks_v[(self.breaks_v > v0) & (self.breaks_v < v1)]]))
+        sub._tree = None
+        return sub
+
+    def pieces(self) -> list:
+        """Sub-patches between creases (C0 knot lines): each is smooth, so it is meshed on its own."""
+        (u0, u1), (v0, v1) = self.domain
+        cu = np.unique(np.concatenate([[u0, u1], self.creases_u[(self.creases_u > u0) & (self.creases_u < u1)]]))
+        cv = np.unique(np.concatenate([[v0, v1], self.creases_v[(self.creases_v > v0) & (self.creases_v < v1)]]))
+        if len(cu) == 2 and len(cv) == 2:
+            return [self]
+        return [self.restrict(((a, b), (c, d))) for a, b in zip(cu[:-1], cu[1:]) for c, d in zip(cv[:-1], cv[1:])]
+
+    def evaluate(self, u, v) -> np.ndarray:
+        return self.d1(u, v)[0]
+
+    def clamp(self, uv: np.ndarray) -> np.ndarray:
+        (u0, u1), (v0, v1) = self.domain
+        return np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)])
+
+    def normal(self, u, v) -> np.ndarray:
+        """Unit normals Su x Sv (m, 3); zero rows where the surface is degenerate (poles)."""
+        _, su, sv = self.d1(u, v)
+        n = np.cross(su, sv)
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-300)
+
+    def project(self, points, uv0, iterations: int = 6):
+        """Gauss-Newton closest points from guesses uv0 (m, 2): (uv (m, 2), distance (m,))."""
+        x = np.asarray(points, float)
+        uv = self.clamp(np.asarray(uv0, float))
+        for _ in range(iterations):
+            s, su, sv = self.d1(uv[:, 0], uv[:, 1])
+            r = x - s
+            a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
+            b1, b2 = (su * r).sum(1), (sv * r).sum(1)
+            reg = 1e-14 * (a11 + a22) + 1e-300
+            det = (a11 + reg) * (a22 + reg) - a12 * a12
+            ok = np.abs(det) > 0
+            du = np.where(ok, ((a22 + reg) * b1 - a12 * b2) / np.where(ok, det, 1.0), 0.0)
+            dv = np.where(ok, ((a11 + reg) * b2 - a12 * b1) / np.where(ok, det, 1.0), 0.0)
+            uv = self.clamp(uv + np.column_stack([du, dv]))
+        dist = np.linalg.norm(x - self.evaluate(uv[:, 0], uv[:, 1]), axis=1)
+        return uv, dist
+
+    def closest(self, points, grid: int = 96, starts: int = 4):
+        """Global closest points: `project` from each of the `starts` nearest nodes of a grid x grid
+        parameter grid (KD-tree over their points), keeping the nearest result."""
+        from scipy.spatial import cKDTree
+
+        if getattr(self, "_tree", None) is None:
+            (u0, u1), (v0, v1) = self.domain
+            gu = np.unique(np.concatenate([np.linspace(u0, u1, grid), self.breaks_u]))
+            gv = np.unique(np.concatenate([np.linspace(v0, v1, grid), self.breaks_v]))
+            uu, vv = np.meshgrid(gu, gv, indexing="ij")
+            nodes = np.column_stack([uu.ravel(), vv.ravel()])
+            self._tree = (cKDTree(self.evaluate(nodes[:, 0], nodes[:, 1])), nodes)
+        tree, nodes = self._tree
+        x = np.asarray(points, float)
+        _, idx = tree.query(x, k=starts)
+        uv, dist = self.project(np.repeat(x, starts, axis=0), nodes[idx.ravel()], iterations=10)
+        best = np.argmin(dist.reshape(-1, starts), axis=1)
+        pick = np.arange(len(x)) * starts + best
+        return uv[pick], dist[pick]
+
+
+def _creases(knots, degree) -> np.ndarray:
+    """Interior knots of multiplicity >= degree: the curve/surface is only C0 there."""
+    values, counts = np.unique(np.asarray(knots, float), return_counts=True)
+    return values[1:-1][counts[1:-1] >= degree]
+
+
+class NurbsPatch(Patch):
+    """A NurbsSurface as a patch (its own (u, v))."""
+
+    def __init__(self, nurbs):
+        self.nurbs = nurbs
+        self.domain = nurbs.domain
+        self.breaks_u = np.unique(nurbs.knots_u[nurbs.degree_u:len(nurbs.knots_u) - nurbs.degree_u])
+        self.breaks_v = np.unique(nurbs.knots_v[nurbs.degree_v:len(nurbs.knots_v) - nurbs.degree_v])
+        self.creases_u = _creases(nurbs.knots_u, nurbs.degree_u)
+        self.creases_v = _creases(nurbs.knots_v, nurbs.degree_v)
+
+    def d1(self, u, v):
+        d = self.nurbs.derivatives(np.asarray(u, float), np.asarray(v, float), 1)
+        return d[0, 0], d[1, 0], d[0, 1]
+
+    def evaluate(self, u, v):
+        return self.nurbs.evaluate(np.asarray(u, float), np.asarray(v, float))
+
+
+class RevolutionPatch(Patch):
+    """A `Revolution` by angle u in [start, end] and profile parameter v: S = a + R_u (C(v) - a)."""
+
+    def __init__(self, rev):
+        self.profile = rev.profile.nurbs()
+        self.a = np.asarray(rev.axis_point, float)
+        self.k = np.asarray(rev.axis_dir, float)
+        self.domain = ((rev.start, rev.end), self.profile.domain)
+        p = self.profile
+        self.breaks_u = np.array([rev.start, rev.end])
+        self.breaks_v = np.unique(p.knots[p.degree:len(p.knots) - p.degree])
+        self.creases_v = _creases(p.knots, p.degree)
+
+    def d1(self, u, v):
+        u = np.asarray(u, float)
+        c = self.profile.derivatives(np.clip(np.asarray(v, float), *self.domain[1]), 1)
+        w, dw = c[0] - self.a, c[1]
+        k = self.k
+        cos, sin = np.cos(u)[:, None], np.sin(u)[:, None]
+
+        def rot(x):  # Rodrigues' rotation of rows x about k by angle u
+            return x * cos + np.cross(k, x) * sin + np.outer(x @ k, k) * (1 - cos)
+
+        rw = rot(w)
+        return self.a + rw, np.cross(k, rw), rot(dw)
+
+
+class PlanePatch(Patch):
+    """A `Plane` by its plane coordinates over the box `domain` (S = origin + u x + v y)."""
+
+    def __init__(self, plane, domain):
+        self.o, self.x, self.y = (np.asarray(a, float) for a in (plane.origin, plane.x_dir, plane.y_dir))
+        self.domain = domain
+        self.breaks_u = np.array(domain[0], float)
+        self.breaks_v = np.array(domain[1], float)
+
+    def d1(self, u, v):
+        u, v = np.asarray(u, float), np.asarray(v, float)
+        s = self.o + u[:, None] * self.x + v[:, None] * self.y
+        return s, np.broadcast_to(self.x, s.shape), np.broadcast_to(self.y, s.shape)
+
+
+def surface_patch(surface, trimmed: bool, plane_box=None) -> Patch:
+    """The patch the mesher uses for a model surface (see the module docstring)."""
+    from rgm.model import Plane, Revolution
+
+    if isinstance(surface, Plane):
+        return PlanePatch(surface, plane_box)
+    if isinstance(surface, Revolution) and not trimmed:
+        return RevolutionPatch(surface)
+    return NurbsPatch(surface.nurbs())
