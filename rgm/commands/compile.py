@@ -162,6 +162,11 @@ def run(args) -> int:
         kwargs["verify"] = True
     kwargs.update(options)
     existed = out.exists()
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        print(f"rgmc compile: error: cannot create {out.parent}: {exc.strerror}", file=sys.stderr)
+        return 1
     return _write(writer, model, out, kwargs, args.target, existed)
 
 
