@@ -16,7 +16,7 @@ Rules, chosen so that `parse(format_program(p)) == p` exactly and formatting is 
 from __future__ import annotations
 
 from . import ast as A
-from .diagnostics import Diagnostic
+from .diagnostics import Diagnostic, error
 
 WIDTH = 100
 INDENT = "    "
@@ -30,7 +30,10 @@ def format_source(text: str | bytes, filename: str = "<input>") -> tuple[str | N
     program, diags = parse(text, filename)
     if program is None or any(d.is_error for d in diags):
         return None, diags
-    return format_program(program), diags
+    try:
+        return format_program(program), diags
+    except RecursionError:   # thousands of nested operators: report, do not crash
+        return None, diags + [error("E0009", "this file is nested too deeply to format", program.span)]
 
 
 def format_program(program: A.Program) -> str:

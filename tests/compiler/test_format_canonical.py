@@ -100,3 +100,8 @@ def test_format_source_refuses_text_with_errors():
 
 def test_empty_program_formats_to_nothing():
     assert fmt("") == "" and fmt("# only a comment\n") == "# only a comment\n"
+
+
+def test_absurd_nesting_is_reported_not_raised():
+    out, diags = format_source("a := " + "-" * 20000 + "1;", "f.rgm")
+    assert out is None and diags[-1].code == "E0009"
