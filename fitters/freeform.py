@@ -120,23 +120,33 @@ def chord_parameters(points: np.ndarray) -> np.ndarray:
     return s / s[-1]
 
 
+def _solve_spd_banded(M: sp.spmatrix, rhs: np.ndarray, bandwidth: int) -> np.ndarray:
+    """Solve M x = rhs for a symmetric positive definite banded M (sparse) by banded Cholesky:
+    O(n b^2) instead of O(n^3) (the B-spline normal matrix has half-bandwidth = degree)."""
+    n = M.shape[0]
+    M = M.tocoo()
+    upper = M.col >= M.row
+    ab = np.zeros((bandwidth + 1, n))
+    ab[bandwidth + M.row[upper] - M.col[upper], M.col[upper]] = M.data[upper]
+    return scipy.linalg.solveh_banded(ab, rhs)
+
+
 def _solve_curve(t, points, knots, degree, smoothing, fix_ends):
     B = design_matrix(t, knots, degree)
     n = B.shape[1]
     D = _second_difference(n)
-    M = (B.T @ B).toarray()
-    lam = smoothing * np.trace(M) / max(n, 1)
-    M += lam * (D.T @ D).toarray()
+    M = (B.T @ B).tocsr()
+    lam = smoothing * M.diagonal().sum() / max(n, 1)
+    M = (M + lam * (D.T @ D)).tocsr()
     rhs = B.T @ points
+    band = max(degree, 2)
     if fix_ends:  # interpolate the first and last point: eliminate those two control points
-        ends = np.array([0, n - 1])
-        inner = np.arange(1, n - 1)
         ctrl = np.empty((n, points.shape[1]))
         ctrl[0], ctrl[-1] = points[0], points[-1]
-        rhs_i = rhs[inner] - M[np.ix_(inner, ends)] @ ctrl[ends]
-        ctrl[inner] = scipy.linalg.solve(M[np.ix_(inner, inner)], rhs_i, assume_a="pos")
+        rhs_i = rhs[1:-1] - M[1:-1][:, [0, n - 1]] @ ctrl[[0, n - 1]]
+        ctrl[1:-1] = _solve_spd_banded(M[1:-1][:, 1:-1], rhs_i, band) if n > 2 else rhs_i
         return ctrl, B
-    return scipy.linalg.solve(M, rhs, assume_a="pos"), B
+    return _solve_spd_banded(M, rhs, band), B
 
 
 def fit_curve(points, tol: float, *, params=None, degree: int = 3, n_initial: int | None = None,

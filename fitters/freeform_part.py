@@ -94,6 +94,45 @@ def grid_from_mesh(points: np.ndarray, faces: np.ndarray | None) -> np.ndarray |
     return points.reshape(len(points) // width, width, 3)
 
 
+def split_patches(grid: np.ndarray, mask: np.ndarray, *, jump: float = 4.0, crease_deg: float = 40.0,
+                  min_pixels: int = 200) -> list[np.ndarray]:
+    """Split a range grid (rows, cols, 3) at its surface discontinuities: depth jumps (a neighbour
+    further than `jump` times the median pixel step) and creases (surface normals of neighbouring
+    pixels more than `crease_deg` apart). Returns one boolean mask per patch, largest first; patches
+    smaller than `min_pixels` are dropped. The paper: "B-splines are subdivided where discontinuities
+    take place"."""
+    g = np.where(mask[..., None], grid, np.nan)
+    du = np.diff(g, axis=0)
+    dv = np.diff(g, axis=1)
+    step = np.nanmedian(np.r_[np.linalg.norm(du, axis=2).ravel(), np.linalg.norm(dv, axis=2).ravel()])
+    bad = ~mask.copy()
+    for d, axis in ((du, 0), (dv, 1)):
+        far = ~(np.linalg.norm(d, axis=2) <= jump * step)     # NaN (invalid neighbour) counts as far
+        lo = [slice(None)] * 2
+        hi = [slice(None)] * 2
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        both_valid = mask[tuple(lo)] & mask[tuple(hi)]
+        cut = far & both_valid
+        bad[tuple(lo)] |= cut
+        bad[tuple(hi)] |= cut
+    n = np.cross(np.gradient(g, axis=0), np.gradient(g, axis=1))
+    n /= np.linalg.norm(n, axis=2, keepdims=True)
+    cos_limit = np.cos(np.radians(crease_deg))
+    for axis in (0, 1):
+        cos = np.sum(np.take(n, range(1, n.shape[axis]), axis=axis)
+                     * np.take(n, range(0, n.shape[axis] - 1), axis=axis), axis=2)
+        crease = np.nan_to_num(cos, nan=1.0) < cos_limit
+        lo = [slice(None)] * 2
+        hi = [slice(None)] * 2
+        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
+        bad[tuple(lo)] |= crease
+        bad[tuple(hi)] |= crease
+    labels, count = ndimage.label(~bad)
+    sizes = np.bincount(labels.ravel())[1:]
+    order = np.argsort(-sizes)
+    return [labels == k + 1 for k in order if sizes[k] >= min_pixels]
+
+
 def _occupancy(u: np.ndarray, v: np.ndarray, bins: int) -> np.ndarray:
     """Cells of a bins x bins raster of [0, 1]² that hold parameters, closed over one-cell gaps."""
     iu = np.clip((u * bins).astype(int), 0, bins - 1)

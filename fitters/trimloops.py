@@ -9,7 +9,7 @@ surface is valid only where data was.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import ndimage
@@ -67,7 +67,8 @@ def signed_area(poly: np.ndarray) -> float:
     return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
 
 
-def corner_indices(poly: np.ndarray, window: int = 3, angle: float = np.deg2rad(50)) -> np.ndarray:
+def corner_indices(poly: np.ndarray, window: int = 3, angle: float = np.deg2rad(50),
+                   min_gap: int = 12) -> np.ndarray:
     """Vertices of a closed polygon (k, 2) where the boundary turns by more than `angle` (radians),
     judged over `window` vertices on each side so that a pixel staircase does not count as corners."""
     k = len(poly)
@@ -80,7 +81,20 @@ def corner_indices(poly: np.ndarray, window: int = 3, angle: float = np.deg2rad(
     left = np.max([np.roll(turn, s) for s in range(1, window + 1)], axis=0)
     right = np.max([np.roll(turn, -s) for s in range(1, window + 1)], axis=0)
     peak = (turn > left) & (turn >= right)  # one vertex per corner, even on a plateau
-    return np.nonzero(peak & (turn > angle))[0]
+    idx = np.nonzero(peak & (turn > angle))[0]
+    if len(idx) < 2:
+        return idx
+    min_gap = max(3, min(min_gap, k // 10))
+    keep = [idx[0]]          # corners closer than `min_gap` vertices: keep the sharper (a ragged edge)
+    for i in idx[1:]:
+        if i - keep[-1] < min_gap:
+            if turn[i] > turn[keep[-1]]:
+                keep[-1] = i
+        else:
+            keep.append(i)
+    if len(keep) > 1 and keep[0] + k - keep[-1] < min_gap:
+        keep.pop(0 if turn[keep[0]] < turn[keep[-1]] else -1)
+    return np.array(keep)
 
 
 def _densify(poly: np.ndarray, per_edge: int = 4) -> np.ndarray:
@@ -153,6 +167,8 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
     outer_i = int(np.argmax(np.abs(areas)))
     outer_sign = np.sign(areas[outer_i])
 
+    lo = np.array([np.min(u_of_row), np.min(v_of_col)])
+    hi = np.array([np.max(u_of_row), np.max(v_of_col)])
     tree = None
     if snap_to is not None:
         from scipy.spatial import cKDTree
@@ -166,7 +182,8 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
             uv = uv[np.r_[True, np.any(np.diff(uv, axis=0) != 0, axis=1)]]  # drop repeated vertices
         if (signed_area(uv) > 0) != want_ccw:
             uv = uv[::-1]
-        return fit_closed_loop(uv, tol_uv, degree)
+        # the control polygon is clamped into the domain, so (convex hull) the loop stays inside it
+        return tuple(replace(piece, ctrl=np.clip(piece.ctrl, lo, hi)) for piece in fit_closed_loop(uv, tol_uv, degree))
 
     outer = fit(polys[outer_i], True)
     holes = tuple(fit(p, False) for i, p in enumerate(polys)

@@ -76,6 +76,8 @@ def _what(obj) -> str:
 # --- curves and surfaces -------------------------------------------------------------------------
 
 def _curve(c, tol: float, out: list) -> None:
+    if getattr(c, "dim", 3) == 2:
+        tol = 1e-12  # parameter-space curves: the model tolerance (a length) does not apply
     if isinstance(c, O.Polyline):
         seg = np.linalg.norm(np.diff(c.points, axis=0), axis=1)
         bad = np.flatnonzero(seg <= tol)

@@ -77,3 +77,29 @@ def test_face_mask_meets_0_4mm():
     assert shape.fit.n_ctrl < grid.shape[0] * grid.shape[1]  # an approximation, not an interpolation
     text = write_rgm([emit_freeform(shape, "face")], inputs=[], options={}, tol=0.4)
     assert not [d for d in rgm.loads(text).diagnostics if d.is_error]
+
+
+SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
+
+
+@pytest.mark.skipif(not (SHARED / "stanford-bunny" / "bun000.ply").exists(), reason="needs ../shared/data")
+def test_bunny_range_view_patches_meet_0_4mm():
+    """A bunny range view (bun000 at full resolution, the body's 160 x 200 pixels): split at its depth
+    jumps and creases into patches, each a trimmed NURBS surface whose p95 residual meets T = 0.4 mm."""
+    from rgm.fitters.freeform_part import split_patches
+
+    scan = read_scan(SHARED / "stanford-bunny" / "bun000.ply")
+    crop = np.s_[170:330, 150:350]
+    ids = scan.grid[crop]
+    valid = ids >= 0
+    grid = np.full(ids.shape + (3,), np.nan)
+    grid[valid] = scan.points[ids[valid]] * 1000.0
+    patches = split_patches(grid, valid, min_pixels=100)
+    assert patches and patches[0].sum() > 0.7 * valid.sum()
+    rows, cols = np.nonzero(patches[0].any(1))[0], np.nonzero(patches[0].any(0))[0]
+    box = np.s_[rows.min():rows.max() + 1, cols.min():cols.max() + 1]
+    shape = fit_freeform(None, 0.4, grid=grid[box], mask=patches[0][box], statistic="p95")
+    assert shape.fit.stats.holds and shape.fit.stats.points == patches[0].sum()
+    assert shape.fit.n_ctrl < 0.25 * patches[0].sum()
+    text = write_rgm([emit_freeform(shape, "bunny")], inputs=[], options={}, tol=0.4)
+    assert not [d for d in rgm.loads(text).diagnostics if d.is_error]
