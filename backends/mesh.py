@@ -241,23 +241,22 @@ def _segment_distance(q, a, b):
     return np.linalg.norm(q - (a + t[..., None] * ab), axis=-1)
 
 
-def _invert(piece, pts, iterations=12):
-    """Parameters s (k,) of the points of piece closest to pts (k, 3): nearest of 513 samples + Newton
-    with central differences."""
+def _invert(piece, pts, iterations=8):
+    """Parameters s (k,) of the points of piece closest to pts (k, 3): nearest of 513 samples, then Newton
+    on (C(s) - X) . C'(s) = 0 with central differences (one batched evaluation per step)."""
     grid = np.linspace(0, 1, 513)
     dense = piece.xyz(grid)
     s = grid[np.argmin(((pts[:, None, :] - dense[None]) ** 2).sum(-1), axis=1)]
-    h = 1e-6
+    h, k = 1e-6, len(pts)
     for _ in range(iterations):
-        c = piece.xyz(s)
-        d = (piece.xyz(s + h) - piece.xyz(s - h)) / (2 * h)
-        dd = (piece.xyz(s + h) - 2 * c + piece.xyz(s - h)) / (h * h)
+        c, cp, cm = np.split(piece.xyz(np.concatenate([s, s + h, s - h])), 3)
+        d, dd = (cp - cm) / (2 * h), (cp - 2 * c + cm) / (h * h)
         r = c - pts
         g = (r * d).sum(1)
-        H = (d * d).sum(1) + (r * dd).sum(1)
-        step = np.where(H > 1e-300, g / np.where(H > 1e-300, H, 1.0), 0.0)
+        hess = (d * d).sum(1) + (r * dd).sum(1)
+        step = np.where(hess > 1e-300, g / np.where(hess > 1e-300, hess, 1.0), 0.0)
         s = np.clip(s - step, 0, 1)
-    return s, np.linalg.norm(piece.xyz(s) - pts, axis=1)
+    return s, np.linalg.norm(piece.xyz(s) - pts, axis=1)[:k]
 
 
 class _Edges:
@@ -469,6 +468,7 @@ class _FaceMesher:
         nb = len(self.b_uv)
         seg_keys = np.sort(self.segments, axis=1).astype(np.int64)
         seg_keys = seg_keys[:, 0] * (1 << 32) + seg_keys[:, 1]
+        self.certified = np.zeros(0, np.int64)   # keys of triangles already measured within tol
         for _ in range(60):
             uv = np.concatenate([self.b_uv, self.interior])
             p = self.scaled(uv)
@@ -491,7 +491,12 @@ class _FaceMesher:
             gid = np.concatenate([self.b_ids, -1 - np.arange(len(self.interior))])
             g = gid[tri]
             live = (g[:, 0] != g[:, 1]) & (g[:, 1] != g[:, 2]) & (g[:, 0] != g[:, 2])
-            fail, worst = self._measure(xyz[tri], uv[tri], live)
+            tkey = np.sort(tri, axis=1)
+            tkey = (tkey[:, 0] << 42) + (tkey[:, 1] << 21) + tkey[:, 2]
+            todo = live & ~np.isin(tkey, self.certified)
+            fail, worst = np.zeros(len(tri), bool), np.zeros(len(tri), int)
+            fail[todo], worst[todo] = self._measure(xyz[tri[todo]], uv[tri[todo]])
+            self.certified = np.union1d(self.certified, tkey[todo & ~fail])
             if not fail.any():
                 self.tri_local, self.xyz, self.uv = tri[live], xyz, uv
                 return self.requests
@@ -521,7 +526,7 @@ class _FaceMesher:
             self.interior = np.concatenate([self.interior, new])
         raise BackendError("a face did not reach the tolerance after 60 refinement passes")
 
-    def _measure(self, v, uvt, live):
+    def _measure(self, v, uvt):
         """(failing (t,), worst sample (t,)) of triangles v (t, 3, 3) with corner parameters uvt (t, 3, 2)."""
         patch = self.face.patch
         x = np.einsum("sk,tkd->tsd", _BARY, v)
@@ -537,7 +542,6 @@ class _FaceMesher:
             ang = np.where(valid, np.arccos(np.clip(cos, -1, 1)), 0.0).max(axis=1) / self.angle_tol
             longest = np.argmax(np.linalg.norm(v[:, [1, 2, 0]] - v, axis=2), axis=1)
             dev[np.arange(len(v)), longest] = np.maximum(dev[np.arange(len(v)), longest], ang)
-        dev[~live] = 0.0
         return dev.max(axis=1) > 1.0, np.argmax(dev, axis=1)
 
 
