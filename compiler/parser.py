@@ -28,7 +28,7 @@ import gc
 import math
 import re
 import threading
-from dataclasses import replace
+from dataclasses import fields, replace
 
 from lark import Lark, Token, Transformer, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
@@ -85,6 +85,20 @@ def parse(text: str | bytes, filename: str = "<input>", *, fast: bool = True
 
 # ------------------------------------------------------------------------------------------------ AST
 
+_FIELDS = {cls: tuple(f.name for f in fields(cls)) for cls in
+           (Span, A.Number, A.String, A.Name, A.Call, A.ListExpr, A.BinOp, A.Neg, A.Member)}
+_object_new = object.__new__
+
+
+def _make(cls, *values):
+    """`cls(*values)` for a frozen dataclass, every field given in order, without the per-field
+    `object.__setattr__` of the generated __init__ (twice as fast; spans and atoms are most of the
+    objects a parse creates). The result is the same object: same fields, equality and hash."""
+    obj = _object_new(cls)
+    obj.__dict__.update(zip(_FIELDS[cls], values))
+    return obj
+
+
 class _Builder(Transformer):
     """Lark callbacks: children (named tokens and already-built nodes) -> AST nodes with spans.
     One instance serves every parse (under _LOCK); `run` is the parse in progress."""
@@ -99,7 +113,7 @@ class _Builder(Transformer):
     def _span(self, first, last) -> Span:
         a = first if first.__class__ is Tok else _position(first)
         b = last if last.__class__ is Tok else _position(last)
-        return Span(self.run.filename, a.line, a.col, b.end_line, b.end_col, a.start_pos, b.end_pos)
+        return _make(Span, self.run.filename, a.line, a.col, b.end_line, b.end_col, a.start_pos, b.end_pos)
 
     # -- expressions
     def number(self, c):
@@ -118,18 +132,18 @@ class _Builder(Transformer):
             self.run.value_error(error("E0006", f"`{tok.value}` is too large for a 64-bit float", span,
                                        "out of range", hint="the largest number is about 1.8e308"))
             value = 0.0
-        return A.Number(value, unit, text.isdigit(), span)
+        return _make(A.Number, value, unit, text.isdigit(), span)
 
     def string(self, c):
         raw = c[0].value[1:-1]
         value = re.sub(r"\\(.)", lambda m: _ESCAPES.get(m.group(1), m.group(1)), raw) if "\\" in raw else raw
-        return A.String(value, self._span(c[0], c[0]))
+        return _make(A.String, value, self._span(c[0], c[0]))
 
     def name(self, c):
-        return A.Name(c[0].value, self._span(c[0], c[0]))
+        return _make(A.Name, c[0].value, self._span(c[0], c[0]))
 
     def call(self, c):
-        func = A.Name(c[0].value, self._span(c[0], c[0]))
+        func = _make(A.Name, c[0].value, self._span(c[0], c[0]))
         args, kwargs = [], []
         for item in c[1:-1]:
             if isinstance(item, tuple):
@@ -141,22 +155,22 @@ class _Builder(Transformer):
                     hint="move it before the named arguments, or give it its name"))
             else:
                 args.append(item)
-        return A.Call(func, tuple(args), tuple(kwargs), self._span(c[0], c[-1]))
+        return _make(A.Call, func, tuple(args), tuple(kwargs), self._span(c[0], c[-1]))
 
     def kwarg(self, c):
         return (c[0].value, c[1], self._span(c[0], c[1]))
 
     def listexpr(self, c):
-        return A.ListExpr(tuple(c[1:-1]), self._span(c[0], c[-1]))
+        return _make(A.ListExpr, tuple(c[1:-1]), self._span(c[0], c[-1]))
 
     def binop(self, c):
-        return A.BinOp(c[1].value, c[0], c[2], self._span(c[0], c[2]))
+        return _make(A.BinOp, c[1].value, c[0], c[2], self._span(c[0], c[2]))
 
     def neg(self, c):
-        return A.Neg(c[1], self._span(c[0], c[1]))
+        return _make(A.Neg, c[1], self._span(c[0], c[1]))
 
     def member(self, c):
-        return A.Member(c[0], c[1].value, self._span(c[0], c[1]))
+        return _make(A.Member, c[0], c[1].value, self._span(c[0], c[1]))
 
     def net(self, c):
         tok = c[0]
