@@ -202,7 +202,15 @@ def _solve(x, r0, theta0, loss, f_scale, max_nfev, tr_solver="exact"):
     return sol
 
 
+#: in normalised units (RMS radius 1) a semi-axis beyond this is a runaway "tube" solution (a huge
+#: superellipsoid whose flat sides pass through the data), not a fit
+_MAX_SEMI_AXIS = 4.0
+
+
 def _median_distance(theta, r0, x):
+    """Median radial distance of x to the candidate theta; infinite for runaway candidates."""
+    if np.max(theta[:3]) > _MAX_SEMI_AXIS:
+        return np.inf
     rot = r0 @ _euler(theta[5:8])[0]
     se = Superellipsoid(theta[:3], theta[3:5], rot, theta[8:], 0.0, 0.0)
     return float(np.median(se.radial_distance(x)))
@@ -260,7 +268,9 @@ def fit_superellipsoid(points, *, max_points: int = 1000, seed: int = 0,
     half = sub[: max(60, len(sub) // 2)]
     finals = [_refine(half, r0, th, ("soft_l1",)) for _, r0, th in candidates[:refine_best]]
     _, r0, theta = min(finals, key=lambda cand: cand[0])
-    _, r0, theta = _refine(sub, r0, theta, ("soft_l1", "cauchy"))
+    score, _, refined = _refine(sub, r0, theta, ("soft_l1", "cauchy"))
+    if np.isfinite(score):  # keep the previous estimate if the last refinement ran away
+        theta = refined
     return _finish(theta, r0, c, scale, xn)
 
 

@@ -1,0 +1,105 @@
+"""Superellipsoid recovery on synthetic data: random sizes (10-100), shapes (eps in [0.1, 1]), poses,
+1 % noise and 5 % outliers.
+
+Bounds (measured over 40 seeds, then given a margin; see benchmarks/bench_superellipsoid.py), met by at
+least 85 % of random cases (the failures are thin shapes; see the bounded-recovery test):
+- surface error: the median radial distance of the true (noise-free) surface to the fit <= 1.5 % of the
+  mean semi-axis, its 90th percentile <= 5 %;
+- size error: sorted semi-axes within 8 % of the largest (a superellipsoid's axes are only defined up to
+  the symmetries of its shape, hence sorted);
+- shape error: |eps1 - eps1'|, |eps2 - eps2'| <= 0.2 when the fit chose the same symmetry (z) axis.
+"""
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from recovery_scans import random_rotation, superellipsoid_cloud
+from rgm.fitters.superellipsoid import Superellipsoid, _residuals, fit_superellipsoid, fit_superellipsoid_plain
+
+
+def _random_superellipsoid(rng):
+    return Superellipsoid(rng.uniform(10, 100, 3), rng.uniform(0.1, 1.0, 2), random_rotation(rng),
+                          rng.uniform(-500, 500, 3), 0.0, 0.0)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_analytic_jacobian_matches_central_differences(seed):
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(40, 3))
+    theta = np.r_[rng.uniform(0.5, 2, 3), rng.uniform(0.15, 1.0, 2), rng.uniform(-0.5, 0.5, 6)]
+    r0 = random_rotation(rng)
+    _, jac = _residuals(theta, x, r0, True)
+    h = 1e-6
+    numeric = np.column_stack([(_residuals(theta + h * e, x, r0, False) - _residuals(theta - h * e, x, r0, False))
+                               / (2 * h) for e in np.eye(11)])
+    assert np.allclose(jac, numeric, rtol=1e-4, atol=1e-5 * np.abs(jac).max())
+
+
+def _recovery_errors(seed, n=3000):
+    rng = np.random.default_rng(seed)
+    truth = _random_superellipsoid(rng)
+    points, _ = superellipsoid_cloud(truth, n, noise=0.01, outliers=0.05, rng=rng)
+    fit = fit_superellipsoid(points)
+    surface = fit.radial_distance(truth.surface_points(rng.normal(size=(2000, 3)))) / truth.size.mean()
+    size = np.max(np.abs(np.sort(fit.size) - np.sort(truth.size))) / truth.size.max()
+    same_axis = abs(fit.rotation[:, 2] @ truth.rotation[:, 2]) > 0.95
+    shape = np.max(np.abs(fit.eps - truth.eps)) if same_axis else 0.0
+    return np.median(surface), np.percentile(surface, 90), size, shape, fit.quality
+
+
+def test_recovery_with_noise_and_outliers_is_bounded():
+    """30 random superellipsoids: at least 85 % within the strict bounds, at most 2 gross failures.
+
+    Known failures (measured, seeds 505, 522, 523, 525 here): thin shapes, the smallest semi-axis about
+    1/8 of the largest.  The noise, 1 % of the *mean* semi-axis, is then 5-10 % of the thin one; the
+    robust inside-outside cost prefers long axes 10-20 % short (523, 525), and for thin discs (505, 522)
+    every start converges to a small box-like shape inside the disc (median surface error ~18 %).  The
+    truth has the lower least-squares cost on the inliers, so these are local minima of the Solina cost.
+    """
+    errors = np.array([_recovery_errors(seed) for seed in range(500, 530)])
+    median, p90, size, shape, quality = errors.T
+    strict = (median <= 0.015) & (p90 <= 0.05) & (size <= 0.08) & (shape <= 0.2)
+    assert strict.mean() >= 0.85, errors[~strict]
+    assert np.sum(median > 0.03) <= 2, errors[median > 0.03]
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.floats(0.001, 1000.0))
+def test_fit_is_independent_of_frame_and_scale(seed, scale):
+    rng = np.random.default_rng(seed)
+    truth = _random_superellipsoid(rng)
+    points, _ = superellipsoid_cloud(truth, 1500, rng=rng)
+    rot, shift = random_rotation(rng), rng.uniform(-1e3, 1e3, 3)
+    a = fit_superellipsoid(points)
+    b = fit_superellipsoid(scale * points @ rot.T + shift)
+    # the same surface (its parameters are defined up to the shape's symmetries, e.g. a1 <-> a2)
+    on_a = scale * a.surface_points(rng.normal(size=(500, 3))) @ rot.T + shift
+    assert np.median(b.radial_distance(on_a)) <= 2e-3 * scale * a.size.mean()
+    assert np.allclose(np.sort(b.size), scale * np.sort(a.size), rtol=5e-3)
+    assert np.allclose(b.center, scale * rot @ a.center + shift, atol=5e-3 * scale * a.size.max())
+    assert abs(b.quality - a.quality) < 1e-3
+
+
+def test_robust_fit_beats_the_plain_fit_with_outliers():
+    errors = {"robust": [], "plain": []}
+    for seed in range(4):
+        rng = np.random.default_rng(100 + seed)
+        truth = _random_superellipsoid(rng)
+        points, _ = superellipsoid_cloud(truth, 3000, noise=0.01, outliers=0.05, rng=rng)
+        true_surface = truth.surface_points(rng.normal(size=(1000, 3)))
+        for name, fitter in (("robust", fit_superellipsoid), ("plain", fit_superellipsoid_plain)):
+            fit = fitter(points)
+            errors[name].append(np.median(fit.radial_distance(true_surface)) / truth.size.mean())
+    assert np.mean(errors["robust"]) * 3 < np.mean(errors["plain"])
+
+
+def test_bad_input_gives_a_clear_error():
+    import pytest
+
+    with pytest.raises(ValueError, match="at least 20 points"):
+        fit_superellipsoid(np.zeros((5, 3)))
+    with pytest.raises(ValueError, match="non-finite"):
+        fit_superellipsoid(np.full((50, 3), np.nan))
