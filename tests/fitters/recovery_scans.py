@@ -137,3 +137,48 @@ def mesh_views(path, directions, *, pitch, noise, outliers, seed, units=1000.0):
         p[bad] += (rng.choice([-1, 1], bad.sum()) * rng.uniform(0.02, 0.2, bad.sum()) * size)[:, None] * d
         views.append(p)
     return views, mesh
+
+
+def _uniform_directions(rng, n):
+    d = rng.normal(size=(n, 3))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def sample_primitive(kind, rng, n=3000, *, noise=0.01, outliers=0.05):
+    """n points on a random `kind` ("box", "cylinder", "sphere", "ellipsoid", "free_form") of random size
+    (10-100 mm) and pose: area-uniform on the surface, Gaussian noise of `noise` x the mean size, a
+    fraction `outliers` uniform in the box 20 % larger than the cloud.  Returns points (n, 3)."""
+    if kind == "box":
+        half = rng.uniform(10, 100, 3)
+        areas = np.array([half[1] * half[2], half[0] * half[2], half[0] * half[1]])
+        axis = rng.choice(3, n, p=areas / areas.sum())
+        p = rng.uniform(-1, 1, (n, 3)) * half
+        p[np.arange(n), axis] = rng.choice([-1, 1], n) * half[axis]
+        size = half.mean()
+    elif kind == "cylinder":
+        r, h = rng.uniform(10, 60), rng.uniform(20, 100)
+        cap = rng.random(n) < r / (r + 2 * h)
+        phi = rng.uniform(0, 2 * np.pi, n)
+        rad = np.where(cap, r * np.sqrt(rng.random(n)), r)
+        z = np.where(cap, rng.choice([-1, 1], n) * h, rng.uniform(-h, h, n))
+        p = np.column_stack([rad * np.cos(phi), rad * np.sin(phi), z])
+        size = (2 * r + h) / 3
+    elif kind in ("sphere", "ellipsoid"):
+        axes = np.full(3, rng.uniform(10, 100)) if kind == "sphere" else np.sort(rng.uniform(10, 100, 3)) * [1, 1.3, 1.8]
+        p = _uniform_directions(rng, n) * axes
+        size = axes.mean()
+    elif kind == "free_form":
+        d = _uniform_directions(rng, n)
+        k = rng.normal(size=(4, 3))
+        amp = rng.uniform(0.1, 0.3)
+        bumps = sum(amp * np.sin(3 * d @ kk + rng.uniform(0, 6)) for kk in k)
+        base = rng.uniform(20, 80)
+        p = d * base * (1 + bumps)[:, None]
+        size = base
+    else:
+        raise ValueError(kind)
+    p = p + rng.normal(0, noise * size, p.shape)
+    bad = rng.random(n) < outliers
+    lo, hi = p.min(0), p.max(0)
+    p[bad] = rng.uniform(lo - 0.2 * (hi - lo), hi + 0.2 * (hi - lo), (bad.sum(), 3))
+    return p @ random_rotation(rng).T + rng.uniform(-300, 300, 3)
