@@ -84,7 +84,21 @@ class FastLALR:
         splice = {i for i in keep if not rule.expansion[i].is_term and rule.expansion[i].name.startswith("_")}
         name = str(rule.origin.name)
         method = getattr(builder, str(rule.alias or name), None)
-        if splice:
+        grows = bool(keep) and keep[0] in splice and rule.expansion[keep[0]].name == rule.origin.name
+        if grows:
+            # a left-recursive list helper (`_x_star: _x_star "," item`): append to the list built
+            # so far instead of copying it, which would make a list of n items cost n^2
+            first, rest = keep[0], keep[1:]
+
+            def children(values):
+                out = values[first]
+                for i in rest:
+                    if i in splice:
+                        out.extend(values[i])
+                    else:
+                        out.append(values[i])
+                return out
+        elif splice:
             def children(values):
                 out = []
                 for i in keep:

@@ -74,13 +74,14 @@ def parse(text: str | bytes, filename: str = "<input>", *, fast: bool = True
         collecting = gc.isenabled()
         gc.disable()     # the tree has no cycles; collection passes during parsing cost a quarter
         try:
-            run.parse(fast)
-        except RecursionError:
-            run.diags.append(error("E0009", "this expression is nested too deeply to read", run.span(0, 1)))
+            try:
+                run.parse(fast)
+            except RecursionError:
+                run.diags.append(error("E0009", "this expression is nested too deeply to read", run.span(0, 1)))
+            return run.program(), run.diags
         finally:
             if collecting:
                 gc.enable()
-        return run.program(), run.diags
 
 
 # ------------------------------------------------------------------------------------------------ AST
