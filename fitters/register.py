@@ -76,16 +76,17 @@ def _spacing(tree: cKDTree, n_sample: int = 1000) -> float:
 
 def icp(source, target, target_normals, init=None, *, source_normals=None, target_weights=None,
         tree: cKDTree | None = None, max_dist: float | None = None, min_dist: float | None = None,
-        max_iter: int = 60, tol: float = 1e-5, sample: int = 4000, kernel: float = 3.0,
-        seed: int = 0) -> IcpResult:
+        max_iter: int = 60, tol: float = 1e-5, sample: int = 4000, final_sample: int = 16000,
+        kernel: float = 3.0, seed: int = 0) -> IcpResult:
     """Robust point-to-plane ICP of source (n, 3) onto target (m, 3) with unit normals (m, 3).
 
     init : (4, 4) initial source-to-target transform; source_normals : (n, 3), if given, matches whose
     normals differ by more than 45 degrees are dropped (edges, the other side of a thin wall);
     target_weights : (m,) confidence of each target point (e.g. its planarity, low at creases);
     max_dist : initial correspondence distance (default: 3 x the median initial distance); min_dist : its
-    floor (default: 3 x the target's point spacing); sample : source points used before the final
-    full-resolution iterations; kernel : Tukey's constant in units of the MAD scale of the residuals
+    floor (default: 3 x the target's point spacing); sample : source points used in the first stage;
+    final_sample : source points (a random subset, Rusinkiewicz & Levoy 2001) of the final stage, which
+    runs to convergence; more points hardly change the pose, whose error is bias, not variance; kernel : Tukey's constant in units of the MAD scale of the residuals
     (3.0 trades a little efficiency for less pull from the rim of the overlap).
     """
     source = np.asarray(source, float)
@@ -94,13 +95,15 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
     spacing = _spacing(tree)
     min_dist = 3 * spacing if min_dist is None else min_dist
     rng = np.random.default_rng(seed)
-    everything = np.arange(len(source))
-    subset = everything if len(source) <= sample else np.sort(rng.choice(len(source), sample, replace=False))
+    def pick(k):
+        return np.arange(len(source)) if len(source) <= k else np.sort(rng.choice(len(source), k, replace=False))
+
+    subset, everything = pick(sample), pick(final_sample)
     radius = float(np.sqrt(((source - source.mean(axis=0)) ** 2).sum(axis=1).mean()))
     if max_dist is None:
         d0 = tree.query(source[subset] @ T[:3, :3].T + T[:3, 3])[0]
         max_dist = max(3 * float(np.median(d0)), min_dist)
-    use, full = subset, len(subset) == len(source)
+    use, full = subset, len(subset) == len(everything)
     prev_cost, it, converged = np.inf, 0, False
     A = np.eye(6)
     rms, overlap = np.inf, None
@@ -139,7 +142,7 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
             if full:
                 converged = True
                 break
-            use, full, prev_cost = everything, True, np.inf                   # finish at full resolution
+            use, full, prev_cost = everything, True, np.inf                   # finish on the larger sample
             continue
         prev_cost = cost
     if overlap is None or not full:
