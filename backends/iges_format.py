@@ -45,6 +45,17 @@ _NAME_UNITS = {name: unit for unit, (_flag, name) in UNIT_FLAGS.items()} | {"IN"
 # --- tokens --------------------------------------------------------------------------------------
 
 _EXP_NO_POINT = re.compile(r"(?<![0-9.])(-?[0-9]+)E")
+_SEP = "\x00"  # token separator while a record is built (never in a token: Hollerith text is cleaned)
+
+
+def _reals_text(arr: np.ndarray, sep: str = _SEP) -> str:
+    """`repr`s of the floats of `arr` joined by `sep`, exponents made Fortran-readable."""
+    if not np.all(np.isfinite(arr)):
+        raise BackendError("IGES cannot represent a non-finite number (inf or nan) in the model")
+    text = sep.join(map(repr, arr.ravel().tolist()))
+    if "e" in text:
+        text = _EXP_NO_POINT.sub(r"\1.E", text.replace("e", "E"))
+    return text
 
 
 def format_reals(values) -> list[str]:
@@ -54,17 +65,13 @@ def format_reals(values) -> list[str]:
     Raises BackendError for inf/nan: IGES has no spelling for them.
     """
     arr = np.asarray(values, dtype=np.float64).ravel()
-    if not np.all(np.isfinite(arr)):
-        raise BackendError("IGES cannot represent a non-finite number (inf or nan) in the model")
-    text = "\x00".join(map(repr, arr.tolist()))
-    if "e" in text:
-        text = _EXP_NO_POINT.sub(r"\1.E", text.replace("e", "E"))
-    return text.split("\x00") if arr.size else []
+    return _reals_text(arr).split(_SEP) if arr.size else []
 
 
 def hollerith(text: str) -> str:
     """`nH...`: n counts the characters; non-ASCII characters become '?' (IGES text is ASCII)."""
-    text = text.encode("ascii", "replace").decode("ascii").replace("\n", " ").replace("\r", " ")
+    text = text.encode("ascii", "replace").decode("ascii")
+    text = text.replace("\n", " ").replace("\r", " ").replace(_SEP, " ")
     return f"{len(text)}H{text}"
 
 
@@ -79,11 +86,13 @@ class Hollerith(str):
 
 def _tokens(values) -> list[str]:
     """Formatted parameter tokens of a list mixing ints, floats, str (Hollerith), None (default, an
-    empty field) and float arrays (each element one real)."""
+    empty field) and float arrays (each element one real). A float array stays one chunk of
+    `_SEP`-separated tokens (see `_spans`), so large nets never become a Python list of strings."""
     out: list[str] = []
     for v in values:
         if isinstance(v, np.ndarray):
-            out.extend(format_reals(v) if v.dtype.kind == "f" else map(str, v.ravel().tolist()))
+            if v.size:
+                out.append(_reals_text(v) if v.dtype.kind == "f" else _SEP.join(map(str, v.ravel().tolist())))
         elif isinstance(v, (bool, np.bool_)):
             out.append("1" if v else "0")
         elif isinstance(v, (int, np.integer)):
@@ -99,22 +108,63 @@ def _tokens(values) -> list[str]:
     return out
 
 
-def _pack(tokens: list[str], width: int, pdelim: str = ",", rdelim: str = ";") -> list[str]:
-    """Fill records of `width` columns with whole tokens, each followed by its delimiter; only a token
-    longer than a record (a long Hollerith string) is split. Returns the record contents."""
-    parts = [t + pdelim for t in tokens]
-    parts[-1] = tokens[-1] + rdelim
-    cum = list(np.cumsum([len(p) for p in parts]).tolist())
-    lines, i, base, n = [], 0, 0, len(parts)
+def _spans(tokens: list[str], width: int, pdelim: str, rdelim: str) -> tuple[str, list]:
+    """The record text `tok1,tok2,...;` and greedy (start, end) offsets of its records of at most
+    `width` columns: whole tokens (with their delimiter) per record; a token longer than a record
+    (a long Hollerith string) starts a record and is split across full ones."""
+    text = _SEP.join(tokens) + _SEP
+    raw = np.frombuffer(text.encode("ascii"), dtype=np.uint8)
+    cum = (np.flatnonzero(raw == 0) + 1).tolist()          # end offset of each token with its delimiter
+    text = text[:-1].replace(_SEP, pdelim) + rdelim
+    spans, i, base, n = [], 0, 0, len(cum)
     while i < n:
-        j = bisect.bisect_right(cum, base + width, lo=i)
-        if j == i:  # one token wider than a record: split it
-            lines.extend(parts[i][k:k + width] for k in range(0, len(parts[i]), width))
+        j = bisect.bisect_right(cum, base + width, i)
+        if j == i:
+            end = cum[i]
+            spans.extend((k, min(k + width, end)) for k in range(base, end, width))
             j = i + 1
         else:
-            lines.append("".join(parts[i:j]))
+            spans.append((base, cum[j - 1]))
         base, i = cum[j - 1], j
-    return lines
+    return text, spans
+
+
+def _pack(tokens: list[str], width: int, pdelim: str = ",", rdelim: str = ";") -> list[str]:
+    """Record contents (see `_spans`) of one parameter list."""
+    text, spans = _spans(tokens, width, pdelim, rdelim)
+    return [text[a:b] for a, b in spans]
+
+
+def _digits(values: np.ndarray, width: int = 7) -> np.ndarray:
+    """(k, width) uint8 ASCII of non-negative ints right-justified in `width` columns (vectorised)."""
+    values = np.asarray(values, dtype=np.int64)
+    powers = 10 ** np.arange(width - 1, -1, -1, dtype=np.int64)
+    d = (values[:, None] // powers) % 10
+    out = (d + ord("0")).astype(np.uint8)
+    lead = np.cumsum(d != 0, axis=1) == 0
+    lead[:, -1] = False
+    out[lead] = ord(" ")
+    return out
+
+
+def _p_section(texts: list[str], spans: list[list], des: list[int]) -> str:
+    """P records: each entity's record spans laid into 80-column rows (columns 1-64 data, 66-72 the
+    owning DE number, 73 'P', 74-80 the sequence number), built as one uint8 array."""
+    counts = np.array([len(sp) for sp in spans], dtype=np.int64)
+    n = int(counts.sum())
+    if n == 0:
+        return ""
+    data = "".join(texts).encode("ascii")
+    offsets = np.cumsum([0] + [len(t) for t in texts[:-1]]).tolist()
+    records = [data[o + a:o + b] for sp, o in zip(spans, offsets) for a, b in sp]
+    buf = np.full((n, 81), ord(" "), dtype=np.uint8)
+    cols = np.array(records, dtype="S64").view(np.uint8).reshape(n, 64)
+    buf[:, :64] = np.where(cols == 0, ord(" "), cols)
+    buf[:, 65:72] = _digits(np.repeat(np.asarray(des, dtype=np.int64), counts))
+    buf[:, 72] = ord("P")
+    buf[:, 73:80] = _digits(np.arange(1, n + 1))
+    buf[:, 80] = ord("\n")
+    return buf.tobytes().decode("ascii")
 
 
 # --- Global section ------------------------------------------------------------------------------
@@ -213,15 +263,16 @@ class IgesFile:
         gtok = [t if t != "0H" else "" for t in gtok]
         g_lines = [f"{t:<72}G{i:7d}" for i, t in enumerate(_pack(gtok, 72, g.param_delimiter,
                                                                   g.record_delimiter), 1)]
-        d_lines, p_lines = [], []
+        d_lines, texts, spans = [], [], []
         pseq = 1
         for k, e in enumerate(self.entities):
             de = 2 * k + 1
             values = [e.type, *e.params]
             if e.properties:
                 values += [0, len(e.properties), *e.properties]
-            records = _pack(_tokens(values), 64, g.param_delimiter, g.record_delimiter)
-            p_lines.extend(f"{r:<64} {de:7d}P{pseq + i:7d}" for i, r in enumerate(records))
+            text, records = _spans(_tokens(values), 64, g.param_delimiter, g.record_delimiter)
+            texts.append(text)
+            spans.append(records)
             status = f"{e.blank:02d}{e.subordinate:02d}{e.use:02d}{e.hierarchy:02d}"
             d_lines.append(f"{e.type:8d}{pseq:8d}{0:8d}{1:8d}{0:8d}{0:8d}{e.transform:8d}{0:8d}"
                            f"{status:>8}D{de:7d}")
@@ -229,8 +280,10 @@ class IgesFile:
             d_lines.append(f"{e.type:8d}{0:8d}{e.color:8d}{len(records):8d}{e.form:8d}{'':8}{'':8}"
                            f"{label:>8}{e.subscript:8d}D{de + 1:7d}")
             pseq += len(records)
-        t_line = f"S{len(s_lines):7d}G{len(g_lines):7d}D{len(d_lines):7d}P{len(p_lines):7d}{'':40}T{1:7d}"
-        return "\n".join(s_lines + g_lines + d_lines + p_lines + [t_line]) + "\n"
+        p_count = pseq - 1
+        t_line = f"S{len(s_lines):7d}G{len(g_lines):7d}D{len(d_lines):7d}P{p_count:7d}{'':40}T{1:7d}"
+        return ("\n".join(s_lines + g_lines + d_lines) + "\n" + _p_section(texts, spans, list(range(1, 2 * len(
+            self.entities), 2))) + t_line + "\n")
 
 
 # --- parsed file (reader side) -------------------------------------------------------------------
@@ -288,7 +341,7 @@ class IgesData:
 
     def int(self, de: int, index: int, default: int | None = 0) -> int:
         tok = self.token(de, index) if index < len(self.params[de]) or default is None else ""
-        if tok == "" and default is not None:
+        if default is not None and not tok.strip():
             return default
         try:
             return _to_int(tok)
@@ -297,7 +350,7 @@ class IgesData:
 
     def real(self, de: int, index: int, default: float | None = 0.0) -> float:
         tok = self.token(de, index) if index < len(self.params[de]) or default is None else ""
-        if tok == "" and default is not None:
+        if default is not None and not tok.strip():
             return default
         try:
             return _to_real(tok)
@@ -312,7 +365,7 @@ class IgesData:
                                   f"the record has {len(toks) - 1}")
         chunk = toks[first:first + count]
         try:
-            return np.array([float(t) for t in chunk], dtype=np.float64)
+            return np.fromiter(map(float, chunk), dtype=np.float64, count=count)
         except ValueError:
             try:
                 return np.array([_to_real(t) for t in chunk], dtype=np.float64)
@@ -348,8 +401,15 @@ def _to_real(tok: str) -> float:
     return value
 
 
+_HOLLERITH_START = re.compile(r"[0-9]\s*H")
+
+
 def _split_params(text: str, pdelim: str, rdelim: str, where) -> list[str]:
-    """Tokens of a free-format parameter string up to the record delimiter (Hollerith aware)."""
+    """Tokens of a free-format parameter string up to the record delimiter (Hollerith aware; a record
+    without any `nH` is split by the C string methods, which is what large nets take)."""
+    if "H" not in text or not _HOLLERITH_START.search(text):
+        head, found, _rest = text.partition(rdelim)
+        return head.split(pdelim) if found or head.strip() else []  # tokens keep their blanks
     out: list[str] = []
     i, n = 0, len(text)
     while i < n:
@@ -406,7 +466,7 @@ def _parse_global(text: str, record: str) -> GlobalSection:
     toks = _split_params(text, pdelim, rdelim, lambda: f"Global section ({record})")
     fields = list(g.__dataclass_fields__.values())
     for f, tok in zip(fields[2:], toks[2:]):
-        if tok == "":
+        if not tok.strip():
             continue
         try:
             value = str(tok) if f.type == "str" else (_to_int(tok) if f.type == "int" else _to_real(tok))
@@ -438,20 +498,25 @@ def parse_iges(text: str) -> IgesData:
     defaulted Global delimiters, comments after the record delimiter); a malformed record raises
     IgesFormatError naming it (`D 17` is the 17th Directory record).
     """
-    sections: dict[str, list[tuple[int, str]]] = {k: [] for k in "SGDPT"}
-    for lineno, raw in enumerate(text.splitlines(), 1):
-        line = raw.rstrip("\r\n")
-        if not line.strip():
-            continue
-        if len(line) < 73:
-            raise IgesFormatError(f"line {lineno}: record is {len(line)} columns long; IGES records have "
-                                  f"80 (section letter in column 73)")
-        letter = line[72]
-        if letter == "C" or (letter == "S" and lineno == 1 and line[72:73] == "C"):
-            raise IgesFormatError(f"line {lineno}: compressed IGES is not supported")
-        if letter not in sections:
+    lines = text.splitlines()
+    letters = [line[72:73] for line in lines]
+    if not set(letters) <= set("SGDPT"):  # also blank lines (letter "")  # find the first bad record for the message
+        for lineno, (line, letter) in enumerate(zip(lines, letters), 1):
+            if not line.strip() or letter in ("S", "G", "D", "P", "T"):
+                continue
+            if len(line) < 73:
+                raise IgesFormatError(f"line {lineno}: record is {len(line)} columns long; IGES records have "
+                                      f"80 (section letter in column 73)")
+            if letter == "C":
+                raise IgesFormatError(f"line {lineno}: compressed IGES is not supported")
             raise IgesFormatError(f"line {lineno}: unknown section letter `{letter}` in column 73")
-        sections[letter].append((lineno, line.ljust(80)))
+    sections: dict[str, list[tuple[int, str]]] = {k: [] for k in "SGDT"}
+    p_rows = []
+    for lineno, (line, letter) in enumerate(zip(lines, letters), 1):
+        if letter == "P":
+            p_rows.append(line[:64])
+        elif letter:  # (blank lines have none)
+            sections[letter].append((lineno, line.ljust(80)))
     if not sections["D"] and not sections["G"]:
         raise IgesFormatError("not an IGES file: no Global or Directory Entry records")
     start = "\n".join(l[:72].rstrip() for _n, l in sections["S"])
@@ -461,7 +526,6 @@ def parse_iges(text: str) -> IgesData:
     if len(d) % 2:
         raise IgesFormatError(f"D {len(d)} (line {d[-1][0]}): the Directory Entry section has an odd number of "
                               f"records; every entity takes two")
-    p_rows = [l[:64] for _n, l in sections["P"]]
     entries: dict[int, DirectoryEntry] = {}
     params: dict[int, list[str]] = {}
     for k in range(0, len(d), 2):
