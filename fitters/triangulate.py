@@ -126,7 +126,8 @@ def _initial_vertices(uv, n_cells, grid=None):
 def _raster(grid, corners, chunk=1_000_000):
     """Pixels inside lattice triangles. corners (m, 3, 2) integer (col, row). Yields (t (k,) triangle,
     pid (k,) grid value (-1 = invalid pixel), lam (k, 3) barycentric coordinates) per chunk. Edge
-    functions in integer arithmetic (Pineda 1988): a pixel on an edge is in both triangles."""
+    functions in exact integer arithmetic (Pineda 1988; int32 suffices below 2^15 pixels a side): a pixel
+    on an edge is in both triangles."""
     c = corners.astype(np.int64)
     lo = c.min(axis=1)
     w = c[:, :, 0].max(axis=1) - lo[:, 0] + 1
@@ -134,32 +135,31 @@ def _raster(grid, corners, chunk=1_000_000):
     area = ((c[:, 1, 0] - c[:, 0, 0]) * (c[:, 2, 1] - c[:, 0, 1])
             - (c[:, 1, 1] - c[:, 0, 1]) * (c[:, 2, 0] - c[:, 0, 0]))
     sg = np.sign(area)
+    small = np.int32 if max(grid.shape) < 2 ** 15 else np.int64
     coef = []                                  # edge k (opposite vertex k): E = e0 + ea * ox + eb * oy
     for k in range(3):
         a, b = c[:, (k + 1) % 3], c[:, (k + 2) % 3]
         ea, eb = -(b[:, 1] - a[:, 1]) * sg, (b[:, 0] - a[:, 0]) * sg
         e0 = ea * (lo[:, 0] - a[:, 0]) + eb * (lo[:, 1] - a[:, 1])
-        coef.append((e0, ea, eb))
+        coef.append((e0.astype(small), ea.astype(small), eb.astype(small)))
+    w32, lo32 = w.astype(small), lo.astype(small)
     count = np.where(area != 0, w * h, 0)
     ends = np.cumsum(count)
     start = 0
     while start < len(c):
         stop = max(int(np.searchsorted(ends, (ends[start - 1] if start else 0) + chunk, side="right")), start + 1)
-        idx = np.arange(start, min(stop, len(c)))
+        idx = np.arange(start, min(stop, len(c)), dtype=small)
         cnt = count[idx]
         t = np.repeat(idx, cnt)
-        off = np.arange(len(t)) - np.repeat(np.cumsum(cnt) - cnt, cnt)
-        wt = w[t]
+        off = np.arange(len(t), dtype=small) - np.repeat((np.cumsum(cnt) - cnt).astype(small), cnt)
+        wt = w32[t]
         oy = off // wt
         ox = off - oy * wt
-        lam = np.empty((len(t), 3))
-        inside = np.ones(len(t), bool)
-        for k, (e0, ea, eb) in enumerate(coef):
-            e = e0[t] + ea[t] * ox + eb[t] * oy
-            inside &= e >= 0
-            lam[:, k] = e
+        e = [e0[t] + ea[t] * ox + eb[t] * oy for e0, ea, eb in coef]
+        inside = (e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)
         t, ox, oy = t[inside], ox[inside], oy[inside]
-        yield t, grid[lo[t, 1] + oy, lo[t, 0] + ox], lam[inside] / np.abs(area[t])[:, None]
+        lam = np.column_stack([x[inside] for x in e]) / np.abs(area[t])[:, None]
+        yield t, grid[lo32[t, 1] + oy, lo32[t, 0] + ox], lam
         start = stop
 
 
