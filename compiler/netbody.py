@@ -110,12 +110,12 @@ def _classify(body: str) -> np.ndarray:
 def _entry_counts(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Numbers per entry (a trailing comma is allowed) and the byte offset where each entry begins.
     Valid bodies are ASCII, so byte offsets are character offsets."""
-    comma = codes == _COMMA
+    commas = np.flatnonzero(codes == _COMMA)
     number = codes == _NUMBER
     starts = np.flatnonzero(number & ~np.concatenate(([False], number[:-1])))
-    entry = np.cumsum(comma)
-    counts = np.bincount(entry[starts], minlength=int(entry[-1]) + 1 if entry.size else 1)
-    entry_starts = np.concatenate(([0], np.flatnonzero(comma) + 1))
+    # the entry of a number is the count of commas before it (a bool cumsum is slow: search instead)
+    counts = np.bincount(np.searchsorted(commas, starts), minlength=commas.size + 1)
+    entry_starts = np.concatenate(([0], commas + 1))
     if counts.size > 1 and counts[-1] == 0:
         counts, entry_starts = counts[:-1], entry_starts[:-1]
     return counts, entry_starts
