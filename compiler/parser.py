@@ -114,7 +114,10 @@ class _Builder(Transformer):
     def _span(self, first, last) -> Span:
         a = first if first.__class__ is Tok else _position(first)
         b = last if last.__class__ is Tok else _position(last)
-        return _make(Span, self.run.filename, a.line, a.col, b.end_line, b.end_col, a.start_pos, b.end_pos)
+        span = _object_new(Span)    # as _make(Span, ...), with the field dict written out (the hottest path)
+        span.__dict__.update({"file": self.run.filename, "line": a.line, "col": a.col, "end_line": b.end_line,
+                              "end_col": b.end_col, "start_pos": a.start_pos, "end_pos": b.end_pos})
+        return span
 
     # -- expressions
     def number(self, c):
