@@ -8,6 +8,7 @@ returns the type of its first argument. The table is also what a diagnostic's `=
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 from .types import (ANGLE, CURVE2, CURVE3, FACE, GEOMETRY, HPOINT, INT, KNOTS, LENGTH, LOOP, NET, NUM,
                     PLANE, POINT2, POINT3, SHELL, STR, SURFACE, VEC, Type, list_of, union, var)
@@ -64,6 +65,7 @@ class Builtin:
     def params(self) -> tuple[Param, ...]:
         return self.overloads[0].params
 
+    @cached_property
     def notes(self) -> tuple[str, ...]:
         """The `= note:` lines: one per overload, or one merged line when there are more than two."""
         if len(self.overloads) <= 2:

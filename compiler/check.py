@@ -13,6 +13,7 @@ override when there is one); `result.types` maps `id(expr)` and binding names to
 """
 from __future__ import annotations
 
+import gc
 from dataclasses import dataclass, field
 
 from . import ast as A
@@ -163,57 +164,47 @@ class _Checker:
                 continue
             sig = builtin.overloads[0]
             bound = self.bind(ann.name, sig, [], [(k, e, self.infer(e, {})) for k, e in ann.args], ann.span,
-                              builtin.notes(), annotation=True)
+                              builtin.notes, annotation=True)
             for key, args in bound.items():
                 param = sig.param(key)
                 expected = param.type if param else sig.extra
-                self.mismatch(ann.name, key, expected, args[0], builtin.notes(), annotation=True)
+                self.mismatch(ann.name, key, expected, args[0], builtin.notes, annotation=True)
                 if (ann.name, key) in FRACTIONS:
                     self.values.fraction(ann.name, key, args[0].expr)
 
     # ------------------------------------------------------------------------------------ expressions
     def infer(self, expr, env: dict[str, T.Type]) -> T.Type:
-        t = self._infer(expr, env)
+        rule = self._RULES.get(type(expr))
+        t = rule(self, expr, env) if rule else T.ANY
         self.types[id(expr)] = t
         return t
 
-    def _infer(self, expr, env) -> T.Type:
-        if isinstance(expr, A.Number):
-            unit = expr.unit
-            if unit in ("deg", "rad"):
-                return T.ANGLE
-            return T.LENGTH if unit else (T.INT if expr.is_int else T.NUM)
-        if isinstance(expr, A.String):
-            return T.STR
-        if isinstance(expr, A.Net):
-            return T.NET
-        if isinstance(expr, A.Name):
-            if expr.id in env:
-                return env[expr.id]
-            return self.binding_type(expr.id)
-        if isinstance(expr, A.ListExpr):
-            t = T.list_of(T.ANY)
-            items = [self.infer(e, env) for e in expr.items]
-            if items:
-                elem = items[0]
-                for it in items[1:]:
-                    elem = T.join(elem, it)
-                t = T.list_of(elem)
-            return t
-        if isinstance(expr, A.Neg):
-            operand = self.infer(expr.operand, env)
-            t = T.unary("-", operand)
-            if t is None:
-                self.diags.append(error("E0306", f"cannot negate {T.describe(operand)}", expr.span,
-                                        f"this is {T.describe(operand)}", [ARITHMETIC]))
-            return t or T.ANY
-        if isinstance(expr, A.BinOp):
-            return self.binop(expr, env)
-        if isinstance(expr, A.Member):
-            return self.member(expr, env)
-        if isinstance(expr, A.Call):
-            return self.call(expr, env)
-        return T.ANY
+    def number(self, expr: A.Number, env) -> T.Type:
+        unit = expr.unit
+        if unit in ("deg", "rad"):
+            return T.ANGLE
+        return T.LENGTH if unit else (T.INT if expr.is_int else T.NUM)
+
+    def name(self, expr: A.Name, env) -> T.Type:
+        return env[expr.id] if expr.id in env else self.binding_type(expr.id)
+
+    def list_expr(self, expr: A.ListExpr, env) -> T.Type:
+        if not expr.items:
+            return T.list_of(T.ANY)
+        items = [self.infer(e, env) for e in expr.items]
+        elem = items[0]
+        for it in items[1:]:
+            if it is not elem:
+                elem = T.join(elem, it)
+        return T.list_of(elem)
+
+    def neg(self, expr: A.Neg, env) -> T.Type:
+        operand = self.infer(expr.operand, env)
+        t = T.unary("-", operand)
+        if t is None:
+            self.diags.append(error("E0306", f"cannot negate {T.describe(operand)}", expr.span,
+                                    f"this is {T.describe(operand)}", [ARITHMETIC]))
+        return t or T.ANY
 
     def binop(self, expr: A.BinOp, env) -> T.Type:
         left, right = self.infer(expr.left, env), self.infer(expr.right, env)
@@ -260,7 +251,7 @@ class _Checker:
         builtin = FUNCTIONS.get(name)
         if builtin is None:
             return T.ANY   # reported by resolve
-        notes = builtin.notes()
+        notes = builtin.notes
         clean = len(self.diags)
         bound = self.bind(name, builtin.overloads[0], args, kwargs, call.span, notes)
         chosen, best, best_bad = None, None, None
@@ -371,8 +362,29 @@ class _Checker:
         return t
 
 
+_Checker._RULES = {
+    A.Number: _Checker.number, A.String: lambda self, e, env: T.STR, A.Net: lambda self, e, env: T.NET,
+    A.Name: _Checker.name, A.ListExpr: _Checker.list_expr, A.Neg: _Checker.neg, A.BinOp: _Checker.binop,
+    A.Member: _Checker.member, A.Call: _Checker.call,
+}
+
+
 def check(program: A.Program, params: dict[str, str] | None = None) -> CheckResult:
-    """Resolve names, check types and constant values of `program`; `params` are `-D name=value` texts."""
+    """Resolve names, check types and constant values of `program`; `params` are `-D name=value` texts.
+
+    The cyclic garbage collector is paused meanwhile: the checker allocates many small objects that
+    live as long as the AST, and on a large file collector passes over the tree cost more than the
+    checking itself (measured: 2.7x on 20 000 statements)."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        return _check(program, params)
+    finally:
+        if enabled:
+            gc.enable()
+
+
+def _check(program: A.Program, params: dict[str, str] | None) -> CheckResult:
     res = resolve(program, params)
     checker = _Checker(program, res)
     checker.run()

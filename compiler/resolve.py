@@ -41,6 +41,9 @@ _DEFINE_VALUE = re.compile(r"^(?P<neg>-)?(?P<num>(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:
                            r"(?P<unit>mm|cm|deg|rad|in|m)?$")
 
 
+_LEAVES = (A.Number, A.String, A.Net)
+
+
 def parse_define(text: str) -> A.Expr | None:
     """A `-D` value as an expression: `30`, `-2.5mm`, `90deg` or a "string"; None when it is none of these."""
     text = text.strip()
@@ -116,7 +119,7 @@ class _Resolver:
         if kind == "fn":
             if stmt.name in FUNCTIONS:   # calls keep going to the builtin, so one error, not a cascade
                 self.report(error("E0104", f"fn `{stmt.name}` shadows the builtin `{stmt.name}`", _span_of(stmt),
-                                  "a builtin has this name", FUNCTIONS[stmt.name].notes(),
+                                  "a builtin has this name", FUNCTIONS[stmt.name].notes,
                                   "calls would be ambiguous; give the fn another name"))
                 return
             self.r.fns[stmt.name] = stmt
@@ -158,13 +161,14 @@ class _Resolver:
         stack = [expr]
         while stack:
             node = stack.pop()
-            if isinstance(node, A.Call):
+            kind = type(node)
+            if kind is A.Call:
                 self.callee(node.func, deps)
                 stack.extend(node.args)
                 stack.extend(e for _, e in node.kwargs)
-            elif isinstance(node, A.Name):
+            elif kind is A.Name:
                 self.value_name(node, scope, fn, deps)
-            else:
+            elif kind not in _LEAVES:
                 stack.extend(A.children(node))
 
     def callee(self, func: A.Name, deps) -> None:
@@ -192,7 +196,7 @@ class _Resolver:
         elif name in self.r.bindings:
             deps.append((name, node))
         elif name in self.r.fns or name in FUNCTIONS:
-            sig = FUNCTIONS[name].notes() if name in FUNCTIONS else ()
+            sig = FUNCTIONS[name].notes if name in FUNCTIONS else ()
             self.report(error("E0113", f"`{name}` is a function, not a value", node.span, "used as a value", sig,
                               f"call it: `{name}(...)`"))
         elif name not in self.program.broken:

@@ -14,17 +14,36 @@ Rules (docs/architecture.md, "The language"):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 
-
-@dataclass(frozen=True)
 class Type:
     """A language type. `kind` is "prim", "list" (args = (element,)), "union" (args = options) or
-    "var" (name = variable, args = (bound,))."""
+    "var" (name = variable, args = (bound,)).
 
-    name: str
-    kind: str = "prim"
-    args: tuple["Type", ...] = ()
+    Types are interned: constructing the same type twice gives the same object, so equality is
+    identity, which keeps the checker's many comparisons cheap on large files.
+    """
+
+    __slots__ = ("name", "kind", "args")
+    _interned: dict = {}
+
+    def __new__(cls, name: str, kind: str = "prim", args: tuple = ()):
+        key = (name, kind, args)
+        t = cls._interned.get(key)
+        if t is None:
+            t = object.__new__(cls)
+            for slot, value in zip(cls.__slots__, key):
+                object.__setattr__(t, slot, value)
+            cls._interned[key] = t
+        return t
+
+    def __setattr__(self, key, value):
+        raise AttributeError("types are immutable")
+
+    def __reduce__(self):
+        return Type, (self.name, self.kind, self.args)
+
+    def __repr__(self) -> str:
+        return f"Type({self})"
 
     def __str__(self) -> str:
         if self.kind == "list":
@@ -114,7 +133,7 @@ def _split_top(text: str, sep: str) -> list[str]:
 
 def accepts(expected: Type, actual: Type) -> bool:
     """Whether a value of type `actual` may be passed where `expected` is required."""
-    if actual == ANY or expected == ANY or expected == actual:
+    if expected is actual or actual is ANY or expected is ANY:
         return True
     if actual.kind == "union":
         return all(accepts(expected, a) for a in actual.args)

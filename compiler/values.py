@@ -194,7 +194,7 @@ class Folder:
         return value
 
     def fold(self, expr, local: frozenset = frozenset()):
-        if self.types.get(id(expr)) == ANY:
+        if self.types.get(id(expr)) is ANY:
             return None
         if isinstance(expr, A.Number):
             return to_model(expr.value, expr.unit, self.units)

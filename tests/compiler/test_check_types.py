@@ -26,7 +26,7 @@ def test_every_builtin_of_the_contract_has_a_signature():
 
 def test_contract_parameter_names_and_defaults_match():
     revolve = builtins.FUNCTIONS["revolve"]
-    assert revolve.notes() == ("revolve(profile: curve3, axis: curve3, from: angle = 0deg, to: angle = 360deg) -> surface",)
+    assert revolve.notes == ("revolve(profile: curve3, axis: curve3, from: angle = 0deg, to: angle = 360deg) -> surface",)
     assert [p.name for p in builtins.FUNCTIONS["bspline"].params] == ["degree", "knots", "points", "weights"]
     assert [p.required for p in builtins.FUNCTIONS["trim"].params] == [True, True, False]
     assert builtins.FUNCTIONS["loop"].params[0].variadic
