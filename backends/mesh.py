@@ -32,10 +32,16 @@ from rgm.errors import BackendError
 
 from .mesh_surface import Patch, surface_patch
 
-#: barycentric weights of the 7 samples per triangle: 3 edge midpoints (edges 01, 12, 20), centroid, 3 inner
-_BARY = np.array([[.5, .5, 0], [0, .5, .5], [.5, 0, .5], [1 / 3, 1 / 3, 1 / 3],
-                  [2 / 3, 1 / 6, 1 / 6], [1 / 6, 2 / 3, 1 / 6], [1 / 6, 1 / 6, 2 / 3]])
-_EDGE_OF_SAMPLE = ((0, 1), (1, 2), (2, 0))
+#: barycentric samples per triangle: the 4-step lattice without corners (9 on the edges 01, 12, 20 at
+#: quarter points, 3 inside) and the centroid. `_EDGE_OF_SAMPLE[k]` is the edge a sample lies on, or -1.
+_BARY = np.array([[.75, .25, 0], [.5, .5, 0], [.25, .75, 0], [0, .75, .25], [0, .5, .5], [0, .25, .75],
+                  [.25, 0, .75], [.5, 0, .5], [.75, 0, .25], [.5, .25, .25], [.25, .5, .25], [.25, .25, .5],
+                  [1 / 3, 1 / 3, 1 / 3]])
+_EDGE_OF_SAMPLE = np.array([0, 0, 0, 1, 1, 1, 2, 2, 2, -1, -1, -1, -1])
+#: the samples must be within CERTIFY * tol: the margin covers the maximum falling between samples
+#: (for a quadratic error the lattice plus centroid misses at most a few per cent)
+CERTIFY = 0.97
+_EDGES = ((0, 1), (1, 2), (2, 0))
 
 
 @dataclass
@@ -217,7 +223,7 @@ def _sample_piece(piece, tol, s=None):
         t = b[:-1, None] + np.diff(b)[:, None] * np.linspace(0, 1, 33)[None, :]
         pts = piece.xyz(t.ravel()).reshape(len(b) - 1, 33, 3)
         d = _segment_distance(pts[:, 1::2], pts[:, 0:-1:2], pts[:, 2::2]).max(axis=1)
-        n = np.maximum(1, np.ceil(16 * np.sqrt(d / tol))).astype(int)
+        n = np.maximum(1, np.ceil(16 * np.sqrt(d / (CERTIFY * tol)))).astype(int)
         s = np.unique(np.concatenate([np.linspace(a, c, k + 1) for a, c, k in zip(b[:-1], b[1:], n)]))
     for _ in range(40):
         p = piece.xyz(s)
@@ -225,10 +231,10 @@ def _sample_piece(piece, tol, s=None):
         fr = np.array([0.25, 0.5, 0.75])
         q = piece.xyz((a[:, None] + h[:, None] * fr).ravel()).reshape(len(a), 3, 3)
         dev = _segment_distance(q, p[:-1, None], p[1:, None]).max(axis=1)
-        bad = dev > tol
+        bad = dev > CERTIFY * tol
         if not bad.any():
             return s
-        k = np.clip(np.ceil(np.sqrt(dev[bad] / tol)), 2, 64).astype(int)
+        k = np.clip(np.ceil(np.sqrt(dev[bad] / (CERTIFY * tol))), 2, 64).astype(int)
         new = [a0 + h0 * np.arange(1, ki) / ki for a0, h0, ki in zip(a[bad], h[bad], k)]
         s = np.unique(np.concatenate([s] + new))
     raise BackendError("a boundary curve could not be sampled to the tolerance")
@@ -367,7 +373,7 @@ def _grid(patch, tol):
         pts = patch.evaluate(uv[0].ravel(), uv[1].ravel()).reshape(len(breaks) - 1, 17, len(probes), 3)
         ends, mids = pts[:, 0::2], pts[:, 1::2]
         d = _segment_distance(mids, ends[:, :-1], ends[:, 1:]).max(axis=(1, 2))
-        n = np.maximum(1, np.ceil(8 * np.sqrt(d / tol))).astype(int)
+        n = np.maximum(1, np.ceil(8 * np.sqrt(d / (CERTIFY * tol)))).astype(int)
         return np.unique(np.concatenate([[breaks[0]]] + [np.linspace(a, b, k + 1)[1:]
                                                          for a, b, k in zip(breaks[:-1], breaks[1:], n)]))
 
@@ -472,8 +478,16 @@ class _FaceMesher:
         for _ in range(60):
             uv = np.concatenate([self.b_uv, self.interior])
             p = self.scaled(uv)
-            tri = Delaunay(p).simplices.astype(np.int64)
-            area = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+            # four far ghost corners: no real point lies on the convex hull, where Qhull may drop
+            # collinear points; triangles using a ghost are outside the face
+            lo, hi = p.min(axis=0), p.max(axis=0)
+            pad = 4 * float(np.max(hi - lo))
+            ghosts = np.array([[lo[0] - pad, lo[1] - pad], [hi[0] + pad, lo[1] - pad], [hi[0] + pad, hi[1] + pad],
+                               [lo[0] - pad, hi[1] + pad]])
+            tri = Delaunay(np.concatenate([p, ghosts])).simplices.astype(np.int64)
+            tri = tri[(tri < len(p)).all(axis=1)]
+            d1, d2 = p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]]
+            area = d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0]
             tri[area < 0] = tri[area < 0][:, [0, 2, 1]]
             tri = tri[_inside(uv[tri].mean(axis=1), self.polygons)]
             e = np.sort(tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
@@ -502,18 +516,15 @@ class _FaceMesher:
                 return self.requests
             tf, wf = tri[fail], worst[fail]
             is_seg = np.isin(ekeys.reshape(-1, 3)[fail], seg_keys)
-            new = []
-            for w in range(7):
-                sel = wf == w
-                if not sel.any():
-                    continue
-                if w < 3:
-                    a, b = _EDGE_OF_SAMPLE[w]
-                    inner = sel & ~is_seg[:, w]
-                    new.append(0.5 * (uv[tf[inner, a]] + uv[tf[inner, b]]))
-                    new.append(uv[tf[sel & is_seg[:, w]]].mean(axis=1))
-                else:
-                    new.append(np.einsum("k,tkd->td", _BARY[w], uv[tf[sel]]))
+            edge = _EDGE_OF_SAMPLE[wf]
+            on_inner = edge >= 0
+            on_inner[on_inner] = ~is_seg[np.flatnonzero(on_inner), edge[on_inner]]
+            ends = np.array(_EDGES)[np.maximum(edge, 0)]
+            rows = np.arange(len(tf))
+            mids = 0.5 * (uv[tf[rows, ends[:, 0]]] + uv[tf[rows, ends[:, 1]]])
+            at = np.einsum("tk,tkd->td", _BARY[wf], uv[tf])
+            at[edge >= 0] = uv[tf[edge >= 0]].mean(axis=1)      # boundary edge: the centroid instead
+            new = [np.where(on_inner[:, None], mids, at)]
             new = np.concatenate(new)
             _, first = np.unique(np.round(self.scaled(new), 9), axis=0, return_index=True)
             new = new[np.sort(first)]
@@ -532,7 +543,7 @@ class _FaceMesher:
         x = np.einsum("sk,tkd->tsd", _BARY, v)
         guess = np.einsum("sk,tkd->tsd", _BARY, uvt)
         _, dist = patch.project(x.reshape(-1, 3), guess.reshape(-1, 2), iterations=4)
-        dev = dist.reshape(len(v), 7) / self.tol
+        dev = dist.reshape(len(v), len(_BARY)) / (CERTIFY * self.tol)
         if self.angle_tol:
             n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
             n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
