@@ -95,21 +95,22 @@ def _inside_outside(p, size, eps):
     return np.exp(np.minimum(e2 / e1 * np.log(pxy), 700.0)) + np.exp(np.minimum(2.0 / e1 * lz, 700.0))
 
 
-def _rot(axis, angle):
-    c, s = np.cos(angle), np.sin(angle)
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    r, d = np.eye(3), np.zeros((3, 3))
-    r[i, i] = r[j, j] = c
-    r[i, j], r[j, i] = -s, s
-    d[i, i] = d[j, j] = -s
-    d[i, j], d[j, i] = -c, c
-    return r, d
-
-
 def _euler(angles):
-    """R = Rz(g) Ry(b) Rx(a) and its three partial derivatives."""
-    (rx, dx), (ry, dy), (rz, dz) = (_rot(k, angles[k]) for k in range(3))
-    return rz @ ry @ rx, (rz @ ry @ dx, rz @ dy @ rx, dz @ ry @ rx)
+    """R = Rz(g) Ry(b) Rx(a) and its three partial derivatives (3, 3) each, in closed form."""
+    ca, sa, cb, sb, cg, sg = (f(t) for t in angles for f in (np.cos, np.sin))
+    r = np.array([[cg * cb, cg * sb * sa - sg * ca, cg * sb * ca + sg * sa],
+                  [sg * cb, sg * sb * sa + cg * ca, sg * sb * ca - cg * sa],
+                  [-sb, cb * sa, cb * ca]])
+    da = np.array([[0.0, cg * sb * ca + sg * sa, -cg * sb * sa + sg * ca],
+                   [0.0, sg * sb * ca - cg * sa, -sg * sb * sa - cg * ca],
+                   [0.0, cb * ca, -cb * sa]])
+    db = np.array([[-cg * sb, cg * cb * sa, cg * cb * ca],
+                   [-sg * sb, sg * cb * sa, sg * cb * ca],
+                   [-cb, -sb * sa, -sb * ca]])
+    dg = np.array([[-sg * cb, -sg * sb * sa - cg * ca, -sg * sb * ca + cg * sa],
+                   [cg * cb, cg * sb * sa - sg * ca, cg * sb * ca + sg * sa],
+                   [0.0, 0.0, 0.0]])
+    return r, (da, db, dg)
 
 
 def _euler_from_matrix(r):
@@ -171,10 +172,12 @@ def _normalise(points):
 
 def _starts(x):
     """Start poses from the moments: PCA axes, each in turn as the local z axis, and each also turned by
-    45 deg about that z axis (PCA axes are arbitrary where two moments are nearly equal); semi-axes from
-    the 2-98 % extent along each axis."""
+    45 deg about that z axis (PCA axes are arbitrary where two moments are nearly equal); each axis' sign
+    makes the third moment positive, so the starts turn with the cloud; semi-axes from the 2-98 % extent
+    along each axis."""
     med = np.median(x, axis=0)
     _, vecs = np.linalg.eigh(np.cov((x - med).T))
+    vecs = vecs * np.where(np.sum(((x - med) @ vecs) ** 3, axis=0) < 0, -1.0, 1.0)  # frame-free signs
     c = np.sqrt(0.5)
     spins = (np.eye(3), np.array([[c, -c, 0.0], [c, c, 0.0], [0.0, 0.0, 1.0]]))
     out = []
