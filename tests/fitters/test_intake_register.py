@@ -23,8 +23,8 @@ def _relative_truth(a, b):
 ])
 def test_known_transform_recovered_after_filtering(part, dir_a, dir_b):
     """Noisy views (0.2 %) with 5 % outliers, filtered, registered with no initial pose."""
-    a = render(part, dir_a, shape=(150, 150), seed=11)
-    b = render(part, dir_b, shape=(150, 150), seed=12)
+    a = render(part, dir_a, shape=(120, 120), seed=11)
+    b = render(part, dir_b, shape=(120, 120), seed=12)
     fa = rlts_filter(a.scan, mode="drop").scan
     fb = rlts_filter(b.scan, mode="drop").scan
     na, nb = estimate_normals(fa), estimate_normals(fb)
