@@ -30,6 +30,7 @@ import re
 import threading
 from dataclasses import fields, replace
 
+import numpy as np
 from lark import Lark, Token, Transformer, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
@@ -184,8 +185,7 @@ class _Builder(Transformer):
         except NetError as e:
             self.run.value_error(error("E0004", e.message, self.run.span(tok.start_pos + e.start, tok.start_pos + e.end),
                                        hint=e.hint))
-            import numpy as np
-            shape, width, data = (1,), 1, np.zeros((1, 1))
+            shape, width, data = (1,), 1, np.zeros((1, 1))   # a stand-in: the statement is dropped
         return A.Net(shape, width, data, span)
 
     # -- declarations
