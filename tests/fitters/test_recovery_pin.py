@@ -107,3 +107,21 @@ def test_fit_reports_a_missing_scan_without_traceback(tmp_path, capsys):
     assert main(["fit", str(tmp_path / "nope.ply"), "--tol", "0.1", "-o", str(tmp_path / "x.rgm")]) == 1
     err = capsys.readouterr().err
     assert "nope.ply" in err and "Traceback" not in err
+
+
+def test_pin_compiles_to_iges_with_a_surface_of_revolution(fitted_pin, tmp_path):
+    _, _, out, _, _ = fitted_pin
+    igs = tmp_path / "pin.igs"
+    assert main(["compile", str(out), "-t", "iges", "-o", str(igs)]) == 0
+    directory = [line for line in igs.read_text().splitlines() if line[72:73] == "D"]
+    types = {int(line[:8]) for line in directory[::2]}
+    assert 120 in types                                    # IGES surface of revolution
+
+
+@pytest.mark.occ
+def test_pin_compiles_to_step(fitted_pin, tmp_path):
+    pytest.importorskip("OCP")
+    _, _, out, _, _ = fitted_pin
+    step = tmp_path / "pin.step"
+    assert main(["compile", str(out), "-t", "step", "-o", str(step)]) == 0
+    assert step.read_text().startswith("ISO-10303-21;")
