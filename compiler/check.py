@@ -264,9 +264,10 @@ class _Checker:
                 best, best_bad = sig, bad
         if chosen is None:
             for param, arg in best_bad:
-                others = [s.param(param.name).type for s in builtin.overloads
-                          if all(T.accepts(p.type, a.type) for p in s.params if p.name != param.name
-                                 for a in bound.get(p.name, ()))]
+                others = [] if param.variadic else [   # what the other overloads would take here
+                    s.param(param.name).type for s in builtin.overloads
+                    if all(T.accepts(p.type, a.type) for p in s.params if p.name != param.name
+                           for a in bound.get(p.name, ()))]
                 expected = T.union(*others) if others else param.type
                 self.mismatch(name, param.name, expected, arg, notes)
             chosen = best

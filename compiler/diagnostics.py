@@ -4,6 +4,12 @@ A diagnostic has a code (`E0xx` errors, `W0xx` warnings), a message, the span it
 expected, and optional notes and a hint. `render` prints the long form with the source line and a
 caret under the span; `short` prints `path:line:col: error[E0301]: message` for editors.
 This module imports nothing heavy: back ends and the model use `Span` from here.
+
+Codes, by stage: E00xx syntax (rgm.compiler.parser), E01xx names and declarations
+(rgm.compiler.resolve), E02xx units and tolerance, E03xx types (rgm.compiler.check), E04xx constant
+values: knot vectors, nets, weights, degenerate geometry (rgm.compiler.valuecheck), E05xx evaluation
+(rgm.compiler.evaluate), E0999 an internal compiler error; W01xx warnings (unused names, unknown
+annotations, repeated exports). tests/compiler/golden/ holds an example of each.
 """
 from __future__ import annotations
 

@@ -272,9 +272,12 @@ class _Resolver:
             path.append(dep)
         self.r.cyclic |= members
         start = self.r.bindings.get(path[0]) or self.r.fns[path[0]]
-        notes = [f"`{a}` uses `{b}` on {_line(ref)}" for a, b, ref in zip(path, path[1:], refs)]
+        notes = [f"`{a}` {'calls' if b in self.r.fns else 'uses'} `{b}` on {_line(ref)}"
+                 for a, b, ref in zip(path, path[1:], refs)]
+        hint = ("a fn is expanded where it is called, so it cannot call itself, directly or through others"
+                if members & set(self.r.fns) else "bindings may come in any order, but not in a circle")
         self.report(error("E0103", f"`{path[0]}` depends on itself: {' -> '.join(path)}", _span_of(start),
-                          "part of a cycle", notes, "bindings may come in any order, but not in a circle"))
+                          "part of a cycle", notes, hint))
 
     def unused(self) -> None:
         has_export = any(isinstance(s, A.Export) for s in self.program.statements)

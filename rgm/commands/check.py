@@ -3,6 +3,7 @@
 Exit codes: 0 clean (warnings allowed), 1 errors, 2 usage (bad option, unreadable file). Diagnostics go
 to stdout in the chosen format, the summary line ("2 errors, 1 warning") to stderr. Whatever the input,
 no Python traceback: a crash inside the compiler is reported as an internal-error diagnostic (E0999).
+Every `-D` applies to every file given, so naming a param one of them lacks is an error (E0108).
 Imports only the front end (lark, no geometry kernels), so it starts fast.
 """
 from __future__ import annotations
