@@ -6,6 +6,17 @@ import tempfile
 from pathlib import Path
 
 
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def _publish_mode(tmp) -> None:
+    """mkstemp creates 0600 files; an output gets the usual 0666 & ~umask like any file a tool writes."""
+    os.chmod(tmp, 0o666 & ~_umask())
+
+
 class OutputExists(Exception):
     """Refusing to overwrite an existing file (an input, say) without an explicit request."""
 
@@ -26,6 +37,7 @@ def write_atomic(path, data, *, overwrite: bool = True) -> Path:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
+        _publish_mode(tmp)
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -45,4 +57,5 @@ def temp_path_beside(path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
     os.close(fd)
+    _publish_mode(tmp)
     return Path(tmp)
