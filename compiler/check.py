@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from . import ast as A
 from . import types as T
 from .builtins import ANNOTATIONS, FRACTIONS, FUNCTIONS, Param, Signature
-from .diagnostics import Diagnostic, error, warning
+from .diagnostics import Diagnostic, error, sort_and_dedupe, warning
 from .resolve import Resolution, resolve
 from .suggest import did_you_mean, suggest
 from .units import to_model
@@ -394,5 +394,5 @@ def _check(program: A.Program, params: dict[str, str] | None) -> CheckResult:
     if tol is not None and tol.value.unit not in ("deg", "rad") and tol.value.value > 0:
         tolerance = to_model(tol.value.value, tol.value.unit, res.units)
     types = dict(checker.types)
-    return CheckResult(res.diagnostics + checker.diags, types, res.order, res.fns, res.bindings, res.overrides,
+    return CheckResult(sort_and_dedupe(res.diagnostics + checker.diags), types, res.order, res.fns, res.bindings, res.overrides,
                        res.exports, res.units, tolerance)

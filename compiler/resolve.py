@@ -306,6 +306,8 @@ class _Resolver:
         for name, text in self.params.items():
             where = f"`-D {name}={text}`"
             binding = self.r.bindings.get(name)
+            if binding is None and name in self.program.broken:
+                continue   # its statement has a syntax error, already reported
             if binding is None:
                 self.report(error("E0108", f"{where}: {filename} has no param `{name}`", None,
                                   notes=[f"its params are {', '.join(params)}" if params else "it declares no params"],

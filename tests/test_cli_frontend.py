@@ -187,3 +187,11 @@ def test_start_up_time(tmp_path):
     print(f"rgmc check {target.name}: wall {min(walls):.3f} s, cpu {min(cpus):.3f} s (best of 3)")
     assert min(cpus) < 1.0
     assert min(walls) < 3.0
+
+
+def test_a_statement_lost_to_a_syntax_error_gives_no_follow_up_errors(tmp_path, capsys):
+    path = _write(tmp_path, "pin.rgm", "param radius := 3mm +;\nfn f(a: length) := pt(a, 0, 0) *;\n"
+                                       "x := polyline([pt(radius, 0, 0), f(2)]);\nexport x;\n")
+    assert main(["check", path, "-D", "radius=4", "--format", "short"]) == 1
+    out = capsys.readouterr().out.splitlines()
+    assert [re.search(r"\[(\w+)\]", ln)[1] for ln in out] == ["E0001", "E0001"], out

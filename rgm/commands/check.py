@@ -9,7 +9,9 @@ Imports only the front end (lark, no geometry kernels), so it starts fast.
 from __future__ import annotations
 
 import json
+import re
 import sys
+from dataclasses import replace
 
 from rgm.compiler.diagnostics import Diagnostic, error, render, short, sort_and_dedupe, summary, to_dict
 
@@ -59,6 +61,16 @@ def internal_error(filename: str, exc: BaseException) -> Diagnostic:
                  hint="this is a bug in rgmc, not in your file; please report it with the file attached")
 
 
+_DEFINED = re.compile(r"^[ \t]*(?:param[ \t]+)?([A-Za-z_]\w*)[ \t]*:=|^[ \t]*fn[ \t]+([A-Za-z_]\w*)", re.MULTILINE)
+
+
+def lost_names(text: str, program) -> set[str]:
+    """Names the text defines (`name :=`, `fn name(`) that the parsed program lacks: their statements were
+    dropped by syntax errors, so "undefined name" reports about them would only repeat those errors."""
+    bound = {s.name for s in program.statements if hasattr(s, "name")}
+    return {a or b for a, b in _DEFINED.findall(text)} - bound
+
+
 def check_source(text: str, filename: str, params: dict[str, str] | None) -> list[Diagnostic]:
     """Every diagnostic of one file: syntax, then (if it parsed) names, types and values."""
     from rgm.compiler.check import check
@@ -68,6 +80,8 @@ def check_source(text: str, filename: str, params: dict[str, str] | None) -> lis
         program, diagnostics = parse(text, filename)
         diagnostics = list(diagnostics)
         if program is not None:
+            if any(d.is_error for d in diagnostics):
+                program = replace(program, broken=program.broken | lost_names(text, program))
             diagnostics += check(program, params).diagnostics
     except Exception as exc:  # noqa: BLE001 - the documented catch-all, reported as E0999
         return [internal_error(filename, exc)]
