@@ -185,7 +185,7 @@ def _locate(scan, uv, tri, simp, which, is_vertex):
     return t, pid, np.column_stack([b, 1 - b.sum(axis=1)]), lost
 
 
-def triangulate(scan: Scan, tol: float, *, disc_slope: float = 6.0, n_cells: int = 16,
+def triangulate(scan: Scan, tol: float, *, disc_slope: float = 6.0, n_cells: int = 8,
                 max_rounds: int = 200) -> Triangulation:
     """Triangulate a single view until every valid point lies within `tol` (file units, along the viewing
     direction) of the mesh; see the module docstring. disc_slope: depth change per unit of lateral
