@@ -121,3 +121,22 @@ def test_parser_accepts_crlf_d_exponents_and_defaulted_delimiters():
 def test_not_iges_is_a_clear_error():
     with pytest.raises(IgesFormatError, match="record is|not an IGES"):
         parse_iges("hello\nworld\n")
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=64, max_size=300),
+       st.sampled_from([1.0, 1e-5, 1e-6, 1e-7, 1e15, 1e16]))
+def test_accelerated_formatting_gives_the_same_text_as_repr(values, scale):
+    """With orjson installed the reals are formatted by it (Ryu); the file must not depend on that."""
+    import rgm.backends.iges_format as F
+
+    if F._orjson is None:
+        pytest.skip("orjson not installed: only the repr path exists")
+    arr = np.array(values) * scale
+    arr = arr[np.isfinite(arr)]
+    fast = F._reals_text(arr, ",")
+    saved, F._orjson = F._orjson, None
+    try:
+        assert fast == F._reals_text(arr, ",")
+    finally:
+        F._orjson = saved
