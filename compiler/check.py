@@ -14,6 +14,7 @@ override when there is one); `result.types` maps `id(expr)` and binding names to
 from __future__ import annotations
 
 import gc
+import sys
 from dataclasses import dataclass, field
 
 from . import ast as A
@@ -48,6 +49,8 @@ class CheckResult:
         return self.overrides.get(name, self.bindings[name].expr)
 
 
+#: recursion limit for a second attempt on very deep expressions (about 4 frames per level)
+DEEP_LIMIT = 100_000
 ARITHMETIC = ("arithmetic: point - point = vec, point ± vec = point, vec ± vec, number × vec, vec / number, "
               "length × number = length, length / length = number, angle ± angle")
 _VERBS = {"+": "add {l} and {r}", "-": "subtract {r} from {l}", "*": "multiply {l} by {r}", "/": "divide {l} by {r}"}
@@ -376,11 +379,20 @@ def check(program: A.Program, params: dict[str, str] | None = None) -> CheckResu
     The cyclic garbage collector is paused meanwhile: the checker allocates many small objects that
     live as long as the AST, and on a large file collector passes over the tree cost more than the
     checking itself (measured: 2.7x on 20 000 statements)."""
-    enabled = gc.isenabled()
+    enabled, limit = gc.isenabled(), sys.getrecursionlimit()
     gc.disable()
     try:
-        return _check(program, params)
+        try:
+            return _check(program, params)
+        except RecursionError:   # a long chain such as 1 + 1 + ... + 1: Python frames are heap-allocated
+            sys.setrecursionlimit(max(limit, DEEP_LIMIT))
+            try:
+                return _check(program, params)
+            except RecursionError:
+                return CheckResult([error("E0311", f"an expression is nested more than {DEEP_LIMIT // 4} levels "
+                                          "deep; split it into bindings", program.span)])
     finally:
+        sys.setrecursionlimit(limit)
         if enabled:
             gc.enable()
 

@@ -231,3 +231,10 @@ def test_parser_engineers_generated_programs_have_no_errors(program):
     well-typed programs with valid knots, nets and weights; unused bindings there are warnings only."""
     errors = [d for d in check(program).diagnostics if d.is_error]
     assert errors == []
+
+
+def test_a_long_sum_is_checked_not_a_recursion_error():
+    text = "param w := " + " + ".join(["1mm"] * 5000) + ";\nx := pt(w, 0, 0);\nexport x;\n"
+    program, syntax = parse(text, "long.rgm")
+    result = check(program)
+    assert syntax == [] and result.diagnostics == [] and result.types["w"] == T.LENGTH
