@@ -9,7 +9,7 @@ from rgm.compiler.parser import _BUILDER, _Run, fast_parser, parse
 
 from strategies import net, programs
 
-SETTINGS = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 
 def _parse_ok(text):
@@ -67,7 +67,7 @@ def test_spans_point_at_the_source():
     assert (right.span.line, right.span.col) == (3, 10)
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(programs())
 def test_generated_programs_are_well_typed(program):
     """The strategies' contract: the checker finds no error in what they draw."""
