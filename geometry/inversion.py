@@ -1,0 +1,252 @@
+"""Point inversion: the closest point of a curve or surface to many query points at once.
+
+Piegl & Tiller §6.1 (A6.x): a robust start from sampling, then Newton iteration on the
+stationarity condition C'(u)·(C(u) - P) = 0 (curves) or S_u·r = S_v·r = 0 with r = S - P
+(surfaces). Here the iteration is a bounded, damped Newton method run on all (point, start) pairs
+as arrays:
+
+- starts: several per point, from different basins of the sampled distance (local minima of the
+  distance over the samples), and the best converged answer is kept. The sample grids adapt to
+  the geometry: each knot span gets samples in proportion to its control polygon's length;
+- pieces: where the curve or surface is only C0 (a knot of multiplicity >= p, e.g. polyline
+  vertices) each start is confined to its smooth piece, and the sample at a kink is repeated on
+  both sides, so minima on either side of a kink are reached with the right one-sided derivatives;
+- step: Newton on the squared distance when its Hessian is positive definite, otherwise the
+  Gauss–Newton matrix, damped Levenberg–Marquardt style;
+- bounds: coordinates sitting on the domain boundary whose gradient points outward are frozen
+  (an active set), the rest move; every step is clamped to the domain;
+- damping: a step that does not reduce the distance is rejected and the damping raised, so the
+  distance never increases and minima on the boundary are found too.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from rgm.errors import GeometryError
+
+__all__ = ["closest_point_curve", "closest_point_surface"]
+
+SEEDS = 6          # Newton starts per query point (surfaces: 4 basins + 2 nearest)
+COARSE, FINE = 40, 240   # samples per direction (about) of the surface seed grids
+MAX_ITER = 60
+
+
+def _queries(points, dim):
+    try:
+        points = np.atleast_2d(np.asarray(points, dtype=float))
+    except (TypeError, ValueError):
+        raise GeometryError("query points must be numbers") from None
+    if points.ndim != 2 or points.shape[1] != dim or not np.all(np.isfinite(points)):
+        raise GeometryError(f"query points must be a finite (k, {dim}) array, got shape {points.shape}")
+    return points
+
+
+def _samples(knots, degree, n, polygon, budget=600):
+    """Sample parameters adapted to the geometry, and the C0 breakpoints.
+
+    polygon : (n-1,) lengths of the control polygon legs (for a surface direction, the largest over
+    the other direction). A span gets between 2p+2 and 64 samples, about one per 1/64 of the whole
+    polygon's length; the total is kept near `budget` (at least 2 per span). Returns (params (s,), breaks (b,)) where breaks
+    are the domain ends and the C0 knots, and every interior C0 knot also appears once more just
+    below itself, so that both one-sided pieces get a start there.
+    """
+    values, counts = np.unique(knots[degree:n + 1], return_counts=True)
+    first = np.searchsorted(knots, values[:-1], side="right") - 1             # span index per span
+    cumulative = np.r_[0.0, np.cumsum(polygon)]
+    span_length = cumulative[first] - cumulative[first - degree]
+    total = max(float(cumulative[-1]), 1e-300)
+    per_span = np.clip(np.ceil(64 * span_length / total), 2 * degree + 2, 64).astype(int)
+    per_span = np.maximum(per_span * min(1.0, budget / per_span.sum()), 2).astype(int)
+    params = [values[:-1, None][i] + np.diff(values)[i] * np.arange(c) / c for i, c in enumerate(per_span)]
+    kinks = values[1:-1][counts[1:-1] >= degree]
+    breaks = np.r_[values[0], kinks, values[-1]]
+    below = np.nextafter(kinks, -np.inf)
+    return np.sort(np.concatenate(params + [below, values[-1:]])), breaks
+
+
+def _piece_bounds(t, breaks):
+    """Bounds (lo, hi) of the smooth piece holding each parameter t; an interior right end is
+    moved just below its knot so that evaluation there uses the left piece's derivatives."""
+    idx = np.clip(np.searchsorted(breaks, t, side="right") - 1, 0, breaks.size - 2)
+    hi = breaks[idx + 1]
+    hi = np.where(idx + 1 < breaks.size - 1, np.nextafter(hi, -np.inf), hi)
+    return breaks[idx], hi
+
+
+def _polygon(ctrl, axis):
+    """Control polygon leg lengths along `axis` of a net, maximised over the other axes: (n-1,)."""
+    legs = np.moveaxis(np.linalg.norm(np.diff(ctrl, axis=axis), axis=-1), axis, 0)
+    return legs.reshape(legs.shape[0], -1).max(axis=1)
+
+
+def _nearest_seeds(sample_points, neighbours, queries, count, candidates=32):
+    """Indices (k, count) of close samples to every query point: among its `candidates` nearest
+    (k-d tree), the local minima of the distance (no grid neighbour closer) first, best first."""
+    from scipy.spatial import cKDTree
+
+    near = min(candidates, sample_points.shape[0])
+    dist, index = cKDTree(sample_points).query(queries, k=near)
+    dist, index = dist.reshape(-1, near), index.reshape(-1, near)
+    around = np.linalg.norm(sample_points[neighbours[index]] - queries[:, None, None, :], axis=-1)
+    is_min = np.all(around >= dist[..., None] * (1 - 1e-9), axis=-1)
+    order = np.argsort(np.where(is_min, dist, dist + np.inf), axis=1, kind="stable")[:, :min(count, near)]
+    return np.take_along_axis(index, order, 1)
+
+
+def _local_minimum_seeds(sample_points, neighbours, queries, count):
+    """Indices (k, count) of samples that are local minima of the distance to each query (no
+    grid neighbour is closer), best first; one start per basin of the sampled distance function.
+
+    neighbours : (s, m) indices of each sample's grid neighbours. Distances are computed in
+    blocks of queries, so memory stays bounded; the cost is k x s.
+    """
+    s = sample_points.shape[0]
+    count = min(count, s)
+    out = np.empty((queries.shape[0], count), dtype=int)
+    block = max(1, (1 << 21) // s)
+    for start in range(0, queries.shape[0], block):
+        q = queries[start:start + block]
+        d2 = np.einsum("qsd,qsd->qs", *(2 * [sample_points[None] - q[:, None]]))
+        # ties count as minima, so the two copies of a kink sample (one per side) both qualify
+        is_min = np.all(d2[:, neighbours] >= d2[:, :, None] * (1 - 1e-9), axis=-1)
+        key = np.where(is_min, d2, np.inf)
+        best = np.argpartition(key, count - 1, axis=1)[:, :count]
+        order = np.argsort(np.take_along_axis(key, best, 1), axis=1)
+        best = np.take_along_axis(best, order, 1)
+        # fewer basins than `count`: repeat the best one
+        missing = ~np.isfinite(np.take_along_axis(key, best, 1))
+        out[start:start + block] = np.where(missing, best[:, :1], best)
+    return out
+
+
+def _grid_neighbours(a, b):
+    """Neighbour indices (a*b, 4) on an a x b grid flattened row-major (edges point to themselves)."""
+    i, j = np.divmod(np.arange(a * b), b)
+    return np.stack([np.maximum(i - 1, 0) * b + j, np.minimum(i + 1, a - 1) * b + j,
+                     i * b + np.maximum(j - 1, 0), i * b + np.minimum(j + 1, b - 1)], axis=1)
+
+
+def _newton(evaluate, x, lo, hi, target):
+    """Bounded, damped Newton minimisation of |F(x) - target|^2 for many starts at once.
+
+    evaluate(x (N, k)) -> (F (N, d), J (N, d, k), H (N, d, k, k)): value, first and second
+    derivatives. x : (N, k) starts; lo, hi : (N, k) bounds per start; target : (N, d).
+    Returns (x (N, k), dist (N,), F (N, d)).
+
+    Levenberg–Marquardt damping: the step solves (M + λ diag(JᵀJ)) s = -g, with M the Newton
+    Hessian where positive definite, else JᵀJ; λ shrinks after a step that lowers the distance and
+    grows after one that does not (which is then rejected). Strongly anisotropic
+    parameterisations (a short knot span beside a long one) converge without line searches.
+    """
+    x = np.clip(x, lo, hi)
+    f, jac, hess = evaluate(x)
+    dist2 = np.einsum("nd,nd->n", f - target, f - target)
+    lam = np.full(x.shape[0], 1e-3)
+    active = np.arange(x.shape[0])
+    tiny = 1e-14 * np.maximum(hi - lo, 1e-300)
+    eye = np.eye(x.shape[1])
+    for _ in range(MAX_ITER):
+        if active.size == 0:
+            break
+        xa, ja, la, ha = x[active], jac[active], lo[active], hi[active]
+        r = f[active] - target[active]
+        grad = np.einsum("ndk,nd->nk", ja, r)
+        gauss = np.einsum("ndk,ndl->nkl", ja, ja)
+        newton = gauss + np.einsum("ndkl,nd->nkl", hess[active], r)
+        frozen = ((xa <= la) & (grad > 0)) | ((xa >= ha) & (grad < 0))
+        free = (~frozen).astype(float)
+        mask = free[:, :, None] * free[:, None, :]
+        pinned = eye * (1.0 - free)[:, None, :]
+        step = _solve(newton * mask + pinned, gauss * mask + pinned, grad * free, lam[active])
+        moved = np.clip(xa + step, la, ha) - xa
+        tf, tj, th = evaluate(xa + moved)
+        td = np.einsum("nd,nd->n", tf - target[active], tf - target[active])
+        ok = td <= dist2[active]
+        accepted = active[ok]
+        x[accepted], f[accepted], jac[accepted], hess[accepted] = xa[ok] + moved[ok], tf[ok], tj[ok], th[ok]
+        dist2[accepted] = td[ok]
+        lam[active] = np.where(ok, lam[active] * 0.3, lam[active] * 10.0)
+        small = np.all(np.abs(moved) <= tiny[active], axis=1)
+        active = active[~small & (lam[active] < 1e12)]
+    return x, np.sqrt(dist2), f
+
+
+def _solve(newton, gauss, grad, lam):
+    """Marquardt step s = -(M + λ diag(JᵀJ))⁻¹ g, M the Newton matrix where positive definite and
+    JᵀJ elsewhere; a tiny ridge keeps degenerate parameterisations (surface poles) solvable."""
+    def positive(m):
+        if m.shape[1] == 1:
+            return m[:, 0, 0] > 0
+        return (m[:, 0, 0] > 0) & (np.linalg.det(m) > 0)
+    base = np.where(positive(newton)[:, None, None], newton, gauss)
+    diag = np.einsum("nkk->nk", gauss)
+    scale = 1e-12 * np.maximum(diag.max(axis=1, keepdims=True), 1e-300)
+    damping = (lam[:, None] * diag + scale)[:, :, None] * np.eye(grad.shape[1])
+    return -np.linalg.solve(base + damping, grad[..., None])[..., 0]
+
+
+def _best(queries, x, dist, f, count):
+    """Among the `count` starts of every query pick the closest converged point."""
+    k = queries.shape[0]
+    choice = np.argmin(dist.reshape(k, count), axis=1)
+    flat = np.arange(k) * count + choice
+    return x[flat], f[flat], dist[flat]
+
+
+def closest_point_curve(curve, points):
+    """Closest points of `curve` to `points (k, d)`: returns (u (k,), pts (k, d), dist (k,)).
+
+    Starts: the best local minima of the distance over the geometry-adapted samples (one per
+    basin), then the bounded damped Newton iteration, each start confined to its smooth piece.
+    """
+    queries = _queries(points, curve.dim)
+    params, breaks = _samples(curve.knots, curve.degree, curve.n, _polygon(curve.ctrl, 0))
+    neighbours = _grid_neighbours(params.size, 1)[:, :2]
+    seeds = _local_minimum_seeds(curve.evaluate(params), neighbours, queries, SEEDS)
+    count = seeds.shape[1]
+    x0 = params[seeds].reshape(-1, 1)
+    lo, hi = _piece_bounds(x0, breaks)
+    target = np.repeat(queries, count, axis=0)
+
+    def evaluate(x):
+        d = curve.derivatives(x[:, 0], 2)
+        return d[0], d[1][:, :, None], d[2][:, :, None, None]
+
+    x, dist, f = _newton(evaluate, x0, lo, hi, target)
+    u, pts, dist = _best(queries, x, dist, f, count)
+    return u[:, 0], pts, dist
+
+
+def closest_point_surface(surface, points):
+    """Closest points of `surface` to `points (k, 3)`: (u (k,), v (k,), pts (k, 3), dist (k,)).
+
+    Starts: the basins (local minima) of the distance sampled on a coarse geometry-adapted grid,
+    and the local minima among the nearest samples of a fine grid; then the bounded damped Newton iteration, each start
+    confined to its smooth patch.
+    """
+    queries = _queries(points, 3)
+    grids = []
+    for budget in (COARSE, FINE):
+        gu, bu = _samples(surface.knots_u, surface.degree_u, surface.nu, _polygon(surface.ctrl, 0), budget)
+        gv, bv = _samples(surface.knots_v, surface.degree_v, surface.nv, _polygon(surface.ctrl, 1), budget)
+        grids.append((gu, gv, surface.evaluate_grid(gu, gv).reshape(-1, 3)))
+    (cu, cv, coarse), (fu, fv, fine) = grids
+    basins = _local_minimum_seeds(coarse, _grid_neighbours(cu.size, cv.size), queries, SEEDS - 2)
+    nearest = _nearest_seeds(fine, _grid_neighbours(fu.size, fv.size), queries, SEEDS - basins.shape[1])
+    x0 = np.concatenate([np.stack([cu[basins // cv.size], cv[basins % cv.size]], axis=-1),
+                         np.stack([fu[nearest // fv.size], fv[nearest % fv.size]], axis=-1)], axis=1)
+    count = x0.shape[1]
+    x0 = x0.reshape(-1, 2)
+    (lo_u, hi_u), (lo_v, hi_v) = _piece_bounds(x0[:, 0], bu), _piece_bounds(x0[:, 1], bv)
+    lo, hi = np.stack([lo_u, lo_v], axis=1), np.stack([hi_u, hi_v], axis=1)
+    target = np.repeat(queries, count, axis=0)
+
+    def evaluate(x):
+        d = surface.derivatives(x[:, 0], x[:, 1], 2)
+        jac = np.stack([d[1, 0], d[0, 1]], axis=-1)
+        hess = np.stack([np.stack([d[2, 0], d[1, 1]], -1), np.stack([d[1, 1], d[0, 2]], -1)], -2)
+        return d[0, 0], jac, hess
+
+    x, dist, f = _newton(evaluate, x0, lo, hi, target)
+    uv, pts, dist = _best(queries, x, dist, f, count)
+    return uv[:, 0], uv[:, 1], pts, dist
