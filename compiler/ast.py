@@ -26,11 +26,12 @@ Statements:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Iterator, Union
-
-import numpy as np
+from typing import TYPE_CHECKING, Iterator, Union
 
 from .diagnostics import Span
+
+if TYPE_CHECKING:   # numpy is imported lazily (Net.__eq__): `rgmc fmt` without nets never loads it
+    import numpy as np
 
 LENGTH_UNITS = ("mm", "cm", "m", "in")
 ANGLE_UNITS = ("deg", "rad")
@@ -142,6 +143,8 @@ class Net:
     def __eq__(self, other):
         if not isinstance(other, Net):
             return NotImplemented
+        import numpy as np   # lazily: `rgmc fmt` on a file without nets never loads numpy
+
         return (self.shape == other.shape and self.width == other.width
                 and self.data.shape == other.data.shape and bool(np.array_equal(self.data, other.data)))
 

@@ -30,7 +30,6 @@ import re
 import threading
 from dataclasses import fields, replace
 
-import numpy as np
 from lark import Lark, Token, Transformer, Tree
 from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedToken
 
@@ -39,7 +38,6 @@ from rgm.grammar import GRAMMAR_PATH
 from . import ast as A
 from .diagnostics import Diagnostic, Span, error
 from .lalr import FastLALR, Tok
-from .netbody import NetError, read_net
 
 MAX_ERRORS = 40
 
@@ -180,6 +178,10 @@ class _Builder(Transformer):
     def net(self, c):
         tok = c[0]
         span = self._span(tok, tok)
+        import numpy as np
+
+        from .netbody import NetError, read_net   # numpy is loaded only when a file has a net
+
         try:
             shape, width, data = read_net(tok.value)
         except NetError as e:
