@@ -208,7 +208,9 @@ def _march(problem, x0, direction: float, sag: float, hmax: float, eps: float):
             xs.append(x_new)
             return np.array(xs), False
         travelled += chord
-        if len(xs) > 3 and np.linalg.norm(p_new - p_start) < h and travelled > 2 * h:
+        # closed when back at the start in space *and* in parameters (not across a periodic seam)
+        if (len(xs) > 3 and travelled > 2 * h and np.linalg.norm(p_new - p_start) < h
+                and np.linalg.norm(x_new - x0) < 2 * h * np.linalg.norm(tpar)):
             xs.append(x0.copy())  # the loop closed
             return np.array(xs), True
         xs.append(x_new)
@@ -238,15 +240,20 @@ def _seg_distance(points, polyline):
 
 # --- fitting and measuring -----------------------------------------------------------------------
 
-def _fit(values, t):
-    """Cubic (or lower, for few points) interpolating clamped NurbsCurve through values (k, d) at t."""
+def _fit(values, t, box=None):
+    """Cubic (or lower, for few points) interpolating clamped NurbsCurve through values (k, d) at t.
+
+    With `box` (lo (d,), hi (d,)) the control points are clamped into it, so by the convex hull
+    property a parameter-space curve never leaves its surface's domain; the error measurement that
+    follows sees any change this makes."""
     from scipy.interpolate import make_interp_spline
 
     from rgm.geometry import NurbsCurve
 
     k = min(3, len(t) - 1)
     spl = make_interp_spline(t, values, k=k)
-    return NurbsCurve(k, spl.t, spl.c, None)
+    ctrl = spl.c if box is None else np.clip(spl.c, box[0], box[1])
+    return NurbsCurve(k, spl.t, ctrl, None)
 
 
 def _fit_branch(problem, xs, closed, split: int):
@@ -263,8 +270,8 @@ def _fit_branch(problem, xs, closed, split: int):
     t = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(p, axis=0), axis=1))])
     t /= t[-1]
     curve = _fit(p, t)
-    uv_a = _fit(xs[:, :2], t)
-    uv_b = _fit(xs[:, 2:4], t) if split == 4 else None
+    uv_a = _fit(xs[:, :2], t, (problem.lo[:2], problem.hi[:2]))
+    uv_b = _fit(xs[:, 2:4], t, (problem.lo[2:], problem.hi[2:])) if split == 4 else None
     return curve, uv_a, uv_b, t
 
 
@@ -326,7 +333,7 @@ def _solve(problem, size: float, tol: float, samples: int) -> list[IntersectionB
         if not retry:
             return [branch for branch, _, _ in accepted]
         pending = np.concatenate(retry)
-        sag /= 4
+        sag, hmax = sag / 4, hmax / 2   # halve every step, also where the curve is nearly straight
     raise GeometryError(f"intersection did not reach tolerance {tol:g} (best {worst:.3g}); "
                         "the surfaces may touch tangentially")
 

@@ -1,0 +1,96 @@
+"""Surface-plane and curve-plane intersections by marching.
+
+Oracles: the geometry core's closest point on the surface (every sampled point of the approximation
+lies within tol of the surface) and the exact signed distance to the plane; a sphere cut by a plane
+is a known circle; curve-plane crossings match the sign changes of a dense sample.
+"""
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from rgm.geometry import NurbsCurve, NurbsSurface
+from rgm.geometry.conics import arc_curve
+from rgm.geometry.intersect import intersect_curve_plane, intersect_surface_plane
+from rgm.geometry.revolve import revolution_surface
+
+KNOTS = np.array([0, 0, 0, 0, 0.5, 1, 1, 1, 1.0])
+
+
+def random_patch(seed: int, rational: bool) -> NurbsSurface:
+    """A bicubic 5 x 5 patch over [0, 10]^2 with random heights (and weights)."""
+    rng = np.random.default_rng(seed)
+    g = np.stack(np.meshgrid(np.linspace(0, 10, 5), np.linspace(0, 10, 5), indexing="ij"), axis=2)
+    ctrl = np.concatenate([g + rng.normal(0, 0.4, g.shape), rng.normal(0, 1.5, (5, 5, 1))], axis=2)
+    weights = rng.uniform(0.5, 2.0, (5, 5)) if rational else None
+    return NurbsSurface(3, 3, KNOTS, KNOTS, ctrl, weights)
+
+
+def oracle_error(surface, origin, normal, branches) -> float:
+    """Max over dense samples of each branch: distance to the surface (closest point) and to the plane,
+    and how far the uv image lands from the 3-D curve."""
+    n = np.asarray(normal, float) / np.linalg.norm(normal)
+    worst = 0.0
+    for br in branches:
+        t = np.linspace(*br.curve.domain, 300)
+        pts = br.curve.evaluate(t)
+        to_surface = surface.closest_point(pts)[-1].max()
+        to_plane = np.abs((pts - origin) @ n).max()
+        along_uv = np.linalg.norm(surface.evaluate(*br.uv_a.evaluate(t).T) - pts, axis=1).max()
+        worst = max(worst, to_surface, to_plane, along_uv)
+    return float(worst)
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rational=st.booleans(),
+       tilt=st.tuples(st.floats(-0.8, 0.8), st.floats(-0.8, 0.8)), at=st.tuples(st.floats(0.2, 0.8), st.floats(0.2, 0.8)))
+def test_surface_plane_points_lie_within_tol_of_both_and_error_shrinks(seed, rational, tilt, at):
+    surface = random_patch(seed, rational)
+    origin = surface.evaluate(np.array([at[0]]), np.array([at[1]]))[0]
+    normal = np.array([tilt[0], tilt[1], 1.0])
+    errors = []
+    for tol in (1e-2, 1e-4):
+        branches = intersect_surface_plane(surface, origin, normal, tol)
+        assert branches, "the plane passes through a point of the surface"
+        assert all(br.max_error <= tol for br in branches)
+        err = oracle_error(surface, origin, normal, branches)
+        assert err <= tol * (1 + 1e-6)
+        errors.append(err)
+    coarse, fine = errors
+    assert fine < coarse or coarse < 1e-4
+
+
+def test_sphere_cut_by_a_plane_is_the_known_circle():
+    radius, height, tol = 10.0, 4.0, 1e-4
+    meridian = arc_curve([0, 0, 0], [0, 0, -1], [1, 0, 0], radius, 0.0, np.pi)   # south pole to north pole
+    sphere = revolution_surface(meridian, [0, 0, 0], [0, 0, 1], 0.0, 2 * np.pi)
+    branches = intersect_surface_plane(sphere, [0, 0, height], [0, 0, 1], tol)
+    pts = np.concatenate([br.curve.evaluate(np.linspace(*br.curve.domain, 400)) for br in branches])
+    assert np.abs(np.hypot(pts[:, 0], pts[:, 1]) - np.sqrt(radius**2 - height**2)).max() <= tol
+    assert np.abs(pts[:, 2] - height).max() <= tol
+    gaps = np.diff(np.sort(np.arctan2(pts[:, 1], pts[:, 0])))
+    assert gaps.max() < 0.1, "the whole circle is covered"
+    for br in branches:  # the seam splits nothing: each branch's ends meet in 3-D
+        assert np.linalg.norm(br.curve.evaluate(np.array(br.curve.domain))[0]
+                              - br.curve.evaluate(np.array(br.curve.domain))[1]) <= tol
+    assert len(branches) == 1
+
+
+def test_plane_missing_the_surface_gives_no_branch():
+    surface = random_patch(7, False)
+    assert intersect_surface_plane(surface, [0, 0, 100], [0, 0, 1], 1e-3) == []
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), offset=st.floats(-1.0, 1.0))
+def test_curve_plane_crossings_match_dense_sign_changes(seed, offset):
+    rng = np.random.default_rng(seed)
+    ctrl = rng.normal(0, 3, (8, 3))
+    knots = np.concatenate([[0] * 4, np.sort(rng.uniform(0.05, 0.95, 4)), [1] * 4])
+    curve = NurbsCurve(3, knots, ctrl, rng.uniform(0.5, 2, 8))
+    origin, normal = np.array([0, 0, offset]), np.array([0.3, -0.2, 1.0])
+    params, pts = intersect_curve_plane(curve, origin, normal)
+    n = normal / np.linalg.norm(normal)
+    assert np.all(np.abs((pts - origin) @ n) <= 1e-9 * (1 + np.abs(ctrl).max()))
+    d = (curve.evaluate(np.linspace(0, 1, 20001)) - origin) @ n
+    assert len(params) == np.count_nonzero(d[:-1] * d[1:] < 0)
