@@ -53,8 +53,10 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
             raise NetError("a comment cannot go inside a net", at, at + 1,
                            "put the comment on the line before the binding")
         shown = ch if ch.isprintable() else f"U+{ord(ch):04X}"
+        hint = ("is the net's closing `]` missing before this?" if ch in ";=:([" else
+                "write each entry as `x y z` and separate entries with `,`")
         raise NetError(f"`{shown}` cannot appear in a net: only numbers separated by spaces, and commas "
-                       "between entries", at, at + 1, "write each entry as `x y z` and separate entries with `,`")
+                       "between entries", at, at + 1, hint)
     counts, entry_starts = _entry_counts(codes)
     if counts.size == 0 or not counts.any():
         raise NetError("this net holds no numbers", 0, len(text), "write entries such as `[0 0 0, 1 0 0]`")

@@ -38,6 +38,8 @@ CASES = [
     ("n := net 1 [1 2 3 4 5];\n", [("E0004", 1, 6)], "1 to 4 numbers"),
     ("n := net 0 x 2 [];\n", [("E0004", 1, 6)], "between 1 and 10^8"),
     ("n := net 4 x 4 [1 2 3, 4 5 6\n", [("E0004", 1, 10)], "malformed net"),
+    ("n := net 2 [1 2 3, 4 5 6;\nm := [1];\n", [("E0004", 1, 25)],
+     "closing `]` missing"),
     ("n := net 1 [1e999 0 0];\n", [("E0004", 1, 13)], "too large"),
     ("a := 1e999;\n", [("E0006", 1, 6)], "too large for a 64-bit float"),
     ("units furlongs;\n", [("E0008", 1, 7)], "unknown units `furlongs`"),
