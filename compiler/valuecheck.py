@@ -14,8 +14,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
 from . import ast as A
 from . import types as T
 from .diagnostics import error
@@ -196,7 +194,7 @@ class ValueChecker:
                 self.report(error("E0416", f"control points need 2 (u v), 3 (x y z) or 4 (x y z w) numbers each, "
                                   f"this net has {pts.width}", points_expr.span, f"width {pts.width}"))
                 return None
-            n, result = int(np.prod(pts.shape)), (T.CURVE2 if pts.width == 2 else None)
+            n, result = math.prod(pts.shape), (T.CURVE2 if pts.width == 2 else None)
             if pts.width == 4:
                 self.problem(_whole(weight_problem(pts.data[..., 3])), points_expr)
                 self._no_double_weights(args, "the net's 4th column")

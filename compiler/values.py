@@ -9,9 +9,8 @@ naming the offending piece so the caller can put the caret on the right argument
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-
-import numpy as np
 
 from . import ast as A
 from .types import ANY
@@ -67,11 +66,10 @@ def degree_problem(degree: int) -> Problem | None:
 
 
 def knot_order_problem(values) -> Problem | None:
-    """The first place where the knot vector decreases."""
-    v = np.asarray(values, dtype=float)
-    bad = np.flatnonzero(np.diff(v) < 0)
-    if bad.size:
-        i = int(bad[0]) + 1
+    """The first place where the knot vector decreases (knot vectors are short: a plain scan)."""
+    v = [float(x) for x in values]
+    i = next((i for i in range(1, len(v)) if v[i] < v[i - 1]), None)
+    if i is not None:
         return Problem("E0402", f"knot vector decreases at its {ordinal(i + 1)} value: "
                                 f"{_fmt(v[i])} after {_fmt(v[i - 1])}", i,
                        "knots must be non-decreasing")
@@ -81,17 +79,19 @@ def knot_order_problem(values) -> Problem | None:
 def multiplicity_problem(values, degree: int) -> Problem | None:
     """An interior knot repeated more than `degree` times (the curve would break apart there), or an
     end knot more than degree + 1 times."""
-    v = np.asarray(values, dtype=float)
-    if v.size == 0:
+    v = [float(x) for x in values]
+    if not v:
         return None
-    uniq, first, counts = np.unique(v, return_index=True, return_counts=True)
-    for value, start, count in zip(uniq, first, counts):
+    counts: dict[float, list[int]] = {}   # value -> [first index, count]
+    for i, x in enumerate(v):
+        counts.setdefault(x, [i, 0])[1] += 1
+    for value, (start, count) in sorted(counts.items()):
         end = value in (v[0], v[-1])
         limit = degree + 1 if end else degree
         if count > limit:
             where = "end" if end else "interior"
             return Problem("E0404", f"{where} knot {_fmt(value)} appears {count} times; "
-                                    f"a degree-{degree} spline allows at most {limit}", int(start))
+                                    f"a degree-{degree} spline allows at most {limit}", start)
     return None
 
 
@@ -114,11 +114,15 @@ def too_few_points_problem(n_ctrl: int, degree: int, what: str = "control points
 
 def weight_problem(weights) -> Problem | None:
     """The first weight that is not strictly positive (a rational B-spline needs w > 0, P&T 4.2)."""
-    w = np.asarray(weights, dtype=float).ravel()
-    bad = np.flatnonzero(~(w > 0))
-    if bad.size:
-        i = int(bad[0])
-        return Problem("E0405", f"weights must be positive, the {ordinal(i + 1)} is {_fmt(w[i])}", i)
+    if hasattr(weights, "ravel"):   # a column of a net's numpy array: vectorised, without importing numpy
+        w = weights.ravel()
+        bad = (~(w > 0)).nonzero()[0]
+        i = int(bad[0]) if bad.size else None
+    else:
+        w = [float(x) for x in weights]
+        i = next((i for i, x in enumerate(w) if not x > 0), None)
+    if i is not None:
+        return Problem("E0405", f"weights must be positive, the {ordinal(i + 1)} is {_fmt(float(w[i]))}", i)
     return None
 
 
@@ -220,7 +224,7 @@ class Folder:
             obj = self.fold(expr.obj, local)
             if isinstance(obj, Point):
                 if expr.attr == "length" and obj.kind == "vec":
-                    return float(np.linalg.norm(obj.coords))
+                    return math.hypot(*obj.coords)
                 names = self._POINTS[obj.kind]
                 attr = {"x": "u", "y": "v"}.get(expr.attr, expr.attr) if obj.kind == "uv" else expr.attr
                 return obj.coords[names.index(attr)] if attr in names else None

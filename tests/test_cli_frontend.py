@@ -167,6 +167,15 @@ def test_no_heavy_imports(tmp_path, command):
     assert "HEAVY=\n" in proc.stderr, proc.stderr
 
 
+def test_numpy_is_not_loaded_for_a_file_without_nets(tmp_path):
+    """numpy is a third of the start-up; only a dense net needs it (the parser loads it lazily, and the
+    checker's knot and weight rules run on plain floats)."""
+    path = _write(tmp_path, "pin.rgm", CLEAN)
+    proc = subprocess.run([sys.executable, "-c", _PROBE.format(argv=["check", path], heavy=("numpy",))],
+                          capture_output=True, text=True)
+    assert "HEAVY=\n" in proc.stderr, proc.stderr
+
+
 def test_start_up_time(tmp_path):
     """`rgmc check examples/pin.rgm` (or a pin of the same size while the example is missing): the target is
     0.3 s. The machine running the suite is shared, so the assertion is on the child's CPU time (immune to
