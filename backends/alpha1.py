@@ -28,13 +28,28 @@ from rgm.model import (
     Loop, Model, Plane, Point, Polyline, Revolution, RuledSurface, Shell, TrimmedFace, Vector,
 )
 
-from .rgm_source import identifier
+
+
+def identifier(name: str, taken: set) -> str:
+    """A valid, unused identifier of the text made from `name` (added to `taken`); the subset's
+    reserved words (nil, ec_open, the order names, units, tolerance) get a trailing `_`."""
+    ident = re.sub(r"[^A-Za-z0-9_]", "_", name.strip()) or "object"
+    if ident[0].isdigit():
+        ident = "_" + ident
+    if ident in RESERVED:
+        ident += "_"
+    base, k = ident, 2
+    while ident in taken:
+        ident, k = f"{base}_{k}", k + 1
+    taken.add(ident)
+    return ident
 
 __all__ = ["write_alpha1", "alpha1_text", "read_alpha1", "Alpha1Error"]
 
 ORDERS = {2: "linear", 3: "quadratic", 4: "cubic", 5: "quartic", 6: "quintic"}
 _ORDER_OF = {v: k for k, v in ORDERS.items()}
 _ANON = "_anon"
+RESERVED = {"nil", "ec_open", "units", "tolerance", "export", *ORDERS.values()}
 
 
 class Alpha1Error(BackendError):
@@ -93,6 +108,8 @@ class _Writer:
         return ident
 
     def ref(self, obj) -> str:
+        if isinstance(obj, (int, float, str)):
+            return _scalar(obj)
         if id(obj) in self.names:
             return self.names[id(obj)]
         name = getattr(obj, "name", None)
@@ -113,6 +130,8 @@ class _Writer:
 
     def expr(self, obj, ident: str | None) -> str:
         r = self.ref
+        if isinstance(obj, (list, tuple)):
+            return f"list({', '.join(r(x) for x in obj)})"
         if isinstance(obj, Point):
             return _pt(obj.xyz)
         if isinstance(obj, Vector):
@@ -166,6 +185,12 @@ class _Writer:
         raise BackendError(f"Alpha_1 text: cannot write {type(obj).__name__}")
 
 
+def _scalar(value) -> str:
+    if isinstance(value, str):
+        return '"' + value.replace('"', "'") + '"'
+    return _n(value)
+
+
 def _parminfo(degree: int, knots) -> str:
     order = ORDERS.get(degree + 1, f"order({degree + 1})")
     return f"parminfo({order}, ec_open, knots({_ns(knots)}))"
@@ -190,15 +215,18 @@ def _children(obj) -> list:
 def alpha1_text(model) -> str:
     """The Alpha_1-style text of every binding of `model` (dependencies first), then its exports."""
     w = _Writer(model)
+    scalars = {**model.params, **{k: v for k, v in model.objects.items() if isinstance(v, (int, float, str))}}
+    for key, value in scalars.items():  # parameters and other number bindings first
+        body = f"param({_n(value)})" if key in model.params else _scalar(value)
+        w.lines.append(f"{identifier(key, w.taken)} := {body};")
     for key in model.exports:
         w.statement(key, model.objects[key])
     for key, obj in model.objects.items():
-        if id(obj) not in w.names:
+        if id(obj) not in w.names and key not in scalars:
             w.statement(key, obj)
     src = f" from {Path(model.source).name}" if model.source else ""
     head = [f"# Alpha_1 shape_edit procedure written by rgm{src}", f'units := "{model.units}";',
             f"tolerance := {_n(model.tolerance)};"]
-    head += [f"{identifier(k, w.taken)} := {_n(v)};" for k, v in model.params.items()]
     tail = [f"export({', '.join(w.names[id(model.objects[k])] for k in model.exports)});"] if model.exports else []
     return "\n".join(head + w.lines + tail) + "\n"
 
@@ -284,6 +312,10 @@ class _Parser:
         return ("call", name, line, args)
 
 
+class _Param(float):
+    """`param(x)`: a number binding that is one of the model's parameters."""
+
+
 class _UVW:
     """`projPt(u, v, w)`: a weighted control point of a parameter-space curve (not a model object)."""
 
@@ -329,6 +361,9 @@ class _Eval:
         if len(args) == 3:  # a weighted parameter-space point
             return _UVW(np.array(args[:2], float), float(args[2]))
         return HPoint(args[:3], args[3])
+
+    def f_param(self, value):
+        return _Param(float(value))
 
     def f_list(self, *items):
         return list(items)
@@ -419,10 +454,8 @@ def read_alpha1(text: str, source: str | None = None) -> Model:
         if name in ("units", "tolerance"):
             units, tolerance = (value, tolerance) if name == "units" else (units, float(value))
             continue
-        if isinstance(value, float):
-            params[name] = value
-            ev.env[name] = value
-            continue
+        if isinstance(value, _Param):
+            value = params[name] = float(value)
         if hasattr(value, "named"):
             value = value.named(None if name.startswith(_ANON) else name)
         ev.env[name] = value

@@ -139,6 +139,8 @@ class _Writer:
             return f"trim({r(obj.surface)}, outer: {outer}, holes: [{holes}])"
         if isinstance(obj, Shell):
             return f"shell([{', '.join(r(f) for f in obj.faces)}])"
+        if isinstance(obj, (list, tuple)):
+            return f"[{', '.join(r(x) if not isinstance(x, (int, float, str)) else _scalar(x) for x in obj)}]"
         raise BackendError(f"cannot write {type(obj).__name__} as .rgm source")
 
     def _plane_size(self) -> float:
@@ -167,13 +169,24 @@ class _Writer:
                 f"knots_v: knots([{_nums(s.knots_v)}]), net: {_net(net)})")
 
 
+def _scalar(value) -> str:
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    return _num(value)
+
+
 def model_to_rgm(model, header: str = "") -> str:
     """The `.rgm` text of `model` (all bindings, exports in order); `header` lines become comments."""
     w = _Writer(model)
+    scalars = {**model.params, **{k: v for k, v in model.objects.items() if isinstance(v, (int, float, str))}}
+    for key, value in scalars.items():  # parameters (and other number bindings) first
+        ident = identifier(key, w.taken)
+        w.lines.append(f"{'param ' if key in model.params else ''}{ident} := {_scalar(value)};")
     for key in model.exports:
         w.binding(key, model.objects[key])
     for key, obj in model.objects.items():
-        w.binding(key, obj)
+        if key not in scalars:
+            w.binding(key, obj)
     out = [f"# {line}" if line else "#" for line in header.splitlines()]
     out += [f"units {model.units};", f"tolerance {_num(model.tolerance)};", ""]
     out += w.lines

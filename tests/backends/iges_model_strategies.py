@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from rgm.geometry import NurbsCurve, NurbsSurface
 from rgm.geometry.knots import uniform_knots
 from rgm.model import (
-    BSplineCurve, BSplineSurface, Circle, CircularArc, CompositeCurve, Extrusion, Line, Loop, Model, Plane,
+    IntersectionCurve, BSplineCurve, BSplineSurface, Circle, CircularArc, CompositeCurve, Extrusion, Line, Loop, Model, Plane,
     Polyline, Revolution, RuledSurface, Shell, TrimmedFace,
 )
 
@@ -160,6 +160,10 @@ def assert_same(a, b, size: float = 100.0, path: str = "", lowered=LOWERED):
         assert_same(a.profile, b.profile, size, f"{where}.profile", lowered)
         assert np.array_equal(a.direction, b.direction), where
     elif isinstance(a, RuledSurface):
+        assert_same(a.a, b.a, size, f"{where}.a", lowered)
+        assert_same(a.b, b.b, size, f"{where}.b", lowered)
+    elif isinstance(a, IntersectionCurve):
+        assert a.tolerance == b.tolerance, where
         assert_same(a.a, b.a, size, f"{where}.a", lowered)
         assert_same(a.b, b.b, size, f"{where}.b", lowered)
     elif isinstance(a, Loop):

@@ -35,7 +35,7 @@ def test_figure7_style_statements(tmp_path):
     assert re.search(r"^skin_1_p1 := (projPt\(\S+, \S+, \S+, \S+\)|pt\(\S+, \S+, \S+\));$", text, re.M)
     assert re.search(r"^skin := surface\(parminfo\((linear|quadratic|cubic), ec_open, knots\(", text, re.M)
     assert re.search(r"^pin := surfRev\(pin_profile, pt\(", text, re.M)
-    assert "radius := 27.15;" in text and lines[-1] == "export(skin, pin);"
+    assert "radius := param(27.15);" in text and lines[-1] == "export(skin, pin);"
 
 
 def test_lazy_intersection_stays_lazy_and_shares_its_operands():
@@ -62,3 +62,23 @@ def test_lazy_intersection_stays_lazy_and_shares_its_operands():
 def test_text_outside_the_subset_names_the_line(text, message):
     with pytest.raises(Alpha1Error, match=message):
         read_alpha1(text)
+
+
+EXAMPLES = sorted((__import__("pathlib").Path(__file__).parents[2] / "examples").glob("*.rgm"))
+
+
+@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.name)
+def test_rgm_alpha1_model_for_the_examples(path, tmp_path):
+    """.rgm → model → Alpha_1 text (via `rgmc compile -t alpha1`) → model: the same model."""
+    import rgm
+    from rgm.cli import main
+
+    model = rgm.load(path)
+    out = tmp_path / "m.a1"
+    assert main(["compile", str(path), "-t", "alpha1", "-o", str(out)]) == 0
+    back = read_alpha1(out.read_text())
+    assert_same_model(model, back, lowered=())
+    assert back.params == model.params
+    for name, value in model.objects.items():
+        if isinstance(value, float):
+            assert back.objects[name] == value

@@ -76,15 +76,16 @@ def _occ_distance_to_model(points, objs):
 
 
 @pytest.mark.occ
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(models(kinds=("bsurface", "revolution", "bspline", "line", "arc", "circle", "polyline", "composite",
-                     "extrusion")))
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(models())
 def test_opencascade_reads_every_file(tmp_path_factory, model):
+    """Every kind; PREF = 2 so that OpenCASCADE's edges are the file's model-space curves (with
+    PREF = 1 it rebuilds them from the pcurves itself, to ~1e-7 of the size: see docs/backends.md)."""
     pytest.importorskip("OCP")
     from rgm.backends.iges_occ_check import occ_read_iges
 
     path = tmp_path_factory.mktemp("iges") / "m.igs"
-    write_iges(model, path)
+    write_iges(model, path, pcurve_preference="3d")
     occ = occ_read_iges(path)
     assert occ.fails == [] and occ.roots == occ.transferred == len(model.exports)
     size = 30.0
