@@ -12,7 +12,8 @@ larger than the cloud).  Errors against the truth:
   surface  median radial distance of the true noise-free surface to the fit / mean semi-axis;
   size     largest error of the sorted semi-axes / largest semi-axis;
   eps      largest |eps error| when the fit chose the same symmetry axis.
-rgm fits on a 1000-point subsample (starts on 166) and measures its quality on all 10,000 points.
+rgm fits on a 600-point subsample (its 12 starts on 120 of them) and measures its quality on all
+10,000 points.
 
 BLAS is set single-threaded before numpy loads (the fits are many small dense problems; on a shared
 machine BLAS threads only add synchronisation).

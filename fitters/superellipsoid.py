@@ -161,9 +161,16 @@ def _residuals(theta, x, r0, want_jac):
 
 
 # --------------------------------------------------------------------------------- recovery
+def _robust_centre(x):
+    """Mean of the 90 % of points nearest the mean: moves with the cloud under rotations and scaling
+    (a coordinate-wise median or percentile would depend on the frame)."""
+    c = x.mean(axis=0)
+    d = np.linalg.norm(x - c, axis=1)
+    return x[d <= np.percentile(d, 90)].mean(axis=0)
+
+
 def _normalise(points):
-    lo, hi = np.percentile(points, [2, 98], axis=0)
-    c = (lo + hi) / 2.0
+    c = _robust_centre(points)
     scale = np.sqrt(np.mean(np.sum((points - c) ** 2, axis=1)))
     if not np.isfinite(scale) or scale <= 0:
         raise ValueError("superellipsoid fit needs points that are not all equal")
@@ -175,7 +182,7 @@ def _starts(x):
     45 deg about that z axis (PCA axes are arbitrary where two moments are nearly equal); each axis' sign
     makes the third moment positive, so the starts turn with the cloud; semi-axes from the 2-98 % extent
     along each axis."""
-    med = np.median(x, axis=0)
+    med = _robust_centre(x)
     _, vecs = np.linalg.eigh(np.cov((x - med).T))
     vecs = vecs * np.where(np.sum(((x - med) @ vecs) ** 3, axis=0) < 0, -1.0, 1.0)  # frame-free signs
     c = np.sqrt(0.5)
@@ -242,7 +249,7 @@ def _finish(theta, r0, c, scale, points_n):
     return Superellipsoid(theta[:3] * scale, theta[3:5].copy(), rot, theta[8:] * scale + c, quality, inliers)
 
 
-def fit_superellipsoid(points, *, max_points: int = 1000, seed: int = 0,
+def fit_superellipsoid(points, *, max_points: int = 600, seed: int = 0,
                        eps_starts=((1.0, 1.0), (0.3, 0.3)), refine_best: int = 2) -> Superellipsoid:
     """Recover a superellipsoid from `points` (n, 3), n >= 20, robust to a few per cent outliers.
 
@@ -258,13 +265,13 @@ def fit_superellipsoid(points, *, max_points: int = 1000, seed: int = 0,
     xn = (points - c) / scale
     rng = np.random.default_rng(seed)
     sub = xn[rng.choice(len(xn), max_points, replace=False)] if len(xn) > max_points else xn
-    coarse = sub[: max(60, len(sub) // 6)]
+    coarse = sub[: max(60, len(sub) // 5)]
     candidates = []
     for r0, size, centre in _starts(sub):
         for e in eps_starts:
             theta0 = np.r_[size, e, 0.0, 0.0, 0.0, centre]
             f_scale = max(1.4826 * np.median(np.abs(_residuals(theta0, coarse, r0, False))), 1e-3)
-            th = _solve(coarse, r0, theta0, "soft_l1", f_scale, 12).x
+            th = _solve(coarse, r0, theta0, "soft_l1", f_scale, 10).x
             # robust costs differ in f_scale: compare the starts by median radial distance
             candidates.append((_median_distance(th, r0, coarse), r0, th))
     candidates.sort(key=lambda cand: cand[0])
