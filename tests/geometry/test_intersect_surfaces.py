@@ -1,0 +1,68 @@
+"""Surface-surface intersection by marching: every point of the approximation lies within tol of both
+surfaces (closest-point oracle), the error shrinks with tol, and a sphere cut by a planar B-spline
+patch gives the known circle."""
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings, strategies as st
+
+from rgm.geometry import NurbsSurface
+from rgm.geometry.conics import arc_curve
+from rgm.geometry.intersect import intersect_surfaces
+from rgm.geometry.revolve import revolution_surface
+
+KNOTS = np.array([0, 0, 0, 0, 0.5, 1, 1, 1, 1.0])
+
+
+def patch(seed: int, tilt: float, rational: bool) -> NurbsSurface:
+    """Bicubic 5 x 5 patch over about [0, 10]^2: random heights around the plane z = tilt * (x - 5)."""
+    rng = np.random.default_rng(seed)
+    g = np.stack(np.meshgrid(np.linspace(0, 10, 5), np.linspace(0, 10, 5), indexing="ij"), axis=2)
+    g = g + rng.normal(0, 0.3, g.shape)
+    z = tilt * (g[..., :1] - 5) + rng.normal(0, 1.2, (5, 5, 1))
+    return NurbsSurface(3, 3, KNOTS, KNOTS, np.concatenate([g, z], axis=2),
+                        rng.uniform(0.6, 1.6, (5, 5)) if rational else None)
+
+
+def oracle_error(sa, sb, branches) -> float:
+    worst = 0.0
+    for br in branches:
+        t = np.linspace(*br.curve.domain, 250)
+        pts = br.curve.evaluate(t)
+        worst = max(worst, sa.closest_point(pts)[-1].max(), sb.closest_point(pts)[-1].max(),
+                    np.linalg.norm(sa.evaluate(*br.uv_a.evaluate(t).T) - pts, axis=1).max(),
+                    np.linalg.norm(sb.evaluate(*br.uv_b.evaluate(t).T) - pts, axis=1).max())
+    return float(worst)
+
+
+@settings(max_examples=4, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rational=st.booleans())
+def test_random_surfaces_points_within_tol_of_both_and_error_shrinks(seed, rational):
+    sa = patch(seed, 0.0, rational)
+    sb = patch(seed + 1, 0.9, not rational)
+    # transpose sb so the two parameterisations differ
+    sb = sb.swap_uv()
+    errors = []
+    for tol in (1e-2, 1e-4):
+        branches = intersect_surfaces(sa, sb, tol)
+        assert branches, "a tilted surface crosses a flat one"
+        assert all(br.max_error <= tol for br in branches)
+        err = oracle_error(sa, sb, branches)
+        assert err <= tol * (1 + 1e-6)
+        errors.append(err)
+    coarse, fine = errors
+    assert fine < coarse or coarse < 1e-4
+
+
+def test_sphere_and_planar_patch_meet_in_the_known_circle():
+    radius, height, tol = 10.0, 3.0, 1e-4
+    meridian = arc_curve([0, 0, 0], [0, 0, -1], [1, 0, 0], radius, 0.0, np.pi)
+    sphere = revolution_surface(meridian, [0, 0, 0], [0, 0, 1], 0.0, 2 * np.pi)
+    corners = np.array([[[-20, -20, height], [-20, 20, height]], [[20, -20, height], [20, 20, height]]], float)
+    flat = NurbsSurface(1, 1, [0, 0, 1, 1], [0, 0, 1, 1], corners)
+    branches = intersect_surfaces(sphere, flat, tol)
+    pts = np.concatenate([br.curve.evaluate(np.linspace(*br.curve.domain, 400)) for br in branches])
+    assert np.abs(np.hypot(pts[:, 0], pts[:, 1]) - np.sqrt(radius**2 - height**2)).max() <= tol
+    assert np.abs(pts[:, 2] - height).max() <= tol
+    assert np.diff(np.sort(np.arctan2(pts[:, 1], pts[:, 0]))).max() < 0.1
+    assert len(branches) == 1
