@@ -25,7 +25,8 @@ from rgm.model import (
     Polyline, Revolution, Shell, TrimmedFace,
 )
 
-from .iges_format import IgesData, IgesFormatError, parse_iges
+from .iges_format import IgesFormatError
+from .iges_parse import IgesData, parse_iges
 
 __all__ = ["IgesImport", "read_iges", "read_iges_file", "SUPPORTED"]
 

@@ -61,7 +61,6 @@ def bench_rgm(model, folder: Path):
 def bench_occ(model, folder: Path):
     try:
         from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
-        from OCP.GeomAdaptor import GeomAdaptor_Surface  # noqa: F401  (presence check)
     except ImportError:
         print("OpenCASCADE (OCP) is not installed: skipping the peer")
         return None

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from rgm.backends.iges_format import parse_iges
+from rgm.backends.iges_parse import parse_iges
 from rgm.backends.iges_read import SUPPORTED, read_iges_file
 from rgm.cli import main
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 from iges_model_strategies import KINDS, assert_same_model, make_object, models
 from rgm.backends.iges import iges_text, write_iges
@@ -44,7 +43,7 @@ def test_output_is_deterministic_and_80_columns(model):
 @SETTINGS
 @given(models(kinds=[k for k in KINDS if k not in ("composite", "plane", "trimmed", "shell")]))
 def test_nurbs_only_writes_126_and_128_with_the_same_geometry(model):
-    from rgm.backends.iges_format import parse_iges
+    from rgm.backends.iges_parse import parse_iges
     from rgm.backends.iges_verify import sample_object
 
     text = iges_text(model, nurbs_only=True)
