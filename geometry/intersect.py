@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rgm.errors import GeometryError
+from rgm.geometry.basis import basis_derivatives, find_spans
 
 
 @dataclass(frozen=True)
@@ -49,9 +50,25 @@ class IntersectionBranch:
 # --- the two zero-set problems -------------------------------------------------------------------
 
 def _partials(surface, u, v):
-    """S, S_u, S_v at paired parameters (m,), each (m, 3)."""
-    d = surface.derivatives(u, v, 1)
-    return d[0][0], d[1][0], d[0][1]
+    """S, S_u, S_v at paired parameters u, v (m,) inside the domain, each (m, 3).
+
+    The same quantities as `surface.derivatives(u, v, 1)` (Piegl & Tiller A3.6 with the quotient
+    rule of A4.4), computed directly from the basis derivatives (A2.3) and the homogeneous net:
+    marching asks for one point at a time, so the per-call overhead is what matters here.
+    """
+    pu, pv = surface.degree_u, surface.degree_v
+    su, sv = find_spans(surface.knots_u, pu, u), find_spans(surface.knots_v, pv, v)
+    nu = basis_derivatives(surface.knots_u, pu, u, 1, su)          # (2, m, pu+1)
+    nv = basis_derivatives(surface.knots_v, pv, v, 1, sv)          # (2, m, pv+1)
+    rows = su[:, None] - pu + np.arange(pu + 1)
+    cols = sv[:, None] - pv + np.arange(pv + 1)
+    patch = surface.homogeneous[rows[:, :, None], cols[:, None, :]]  # (m, pu+1, pv+1, 4)
+    h = np.einsum("mi,mijk,mj->mk", nu[0], patch, nv[0])
+    hu = np.einsum("mi,mijk,mj->mk", nu[1], patch, nv[0])
+    hv = np.einsum("mi,mijk,mj->mk", nu[0], patch, nv[1])
+    w = h[:, 3:]
+    p = h[:, :3] / w
+    return p, (hu[:, :3] - hu[:, 3:] * p) / w, (hv[:, :3] - hv[:, 3:] * p) / w
 
 
 class _PlaneProblem:
