@@ -8,10 +8,13 @@ Codes:
     W0505  a loop piece runs backwards (its end meets the next piece's end); back ends reverse it
     E0506  a parameter-space loop piece leaves the surface's domain
     E0507  a 3-D loop piece does not lie on the trimmed surface (farther than the tolerance)
+    E0508  an intersection used as a loop piece has no branch or several (a piece needs one)
+    E0509  an intersection used as a loop piece is not an intersection *of* the trimmed surface
 
-Lazy pieces (`intersect(...)`) are not computed here: a loop that contains one is checked for
-closure and placement when a back end approximates it (`IntersectionCurve.approximate`), so
-`rgmc check` and `rgm.load` never march an intersection.
+Lazy pieces (`intersect(...)`) are not computed by `validate`: `rgmc check` and `rgm.load` never
+march an intersection. Loops that contain one are checked by `validate_lazy(model, tol)` once the
+intersections are approximated (`rgmc compile` calls it before handing the model to a back end;
+the approximations are cached, so the back end reuses them at the same tolerance).
 """
 from __future__ import annotations
 
@@ -32,6 +35,88 @@ def validate(model: O.Model) -> list[Diagnostic]:
     for obj in model.objects.values():
         _visit(obj, model.tolerance, out, seen)
     return out
+
+
+def validate_lazy(model: O.Model, tol: float | None = None) -> list[Diagnostic]:
+    """Closure of the loops that contain intersections, approximated at `tol` (default: the model
+    tolerance); the gap allowed is the model tolerance plus `tol`. Intersection pieces may run
+    either way (a marched branch has no preferred direction)."""
+    tol = model.tolerance if tol is None else float(tol)
+    out: list[Diagnostic] = []
+    faces = _faces(model)
+    for face in faces:
+        for lp in face.loops():
+            if lp.is_lazy:
+                _lazy_loop(face, lp, tol, model.tolerance + tol, out)
+    return out
+
+
+def _faces(model: O.Model) -> list:
+    seen, faces = set(), []
+    stack = list(model.objects.values())
+    while stack:
+        obj = stack.pop()
+        if id(obj) in seen:
+            continue
+        seen.add(id(obj))
+        if isinstance(obj, O.TrimmedFace):
+            faces.append(obj)
+        elif isinstance(obj, O.Shell):
+            stack.extend(obj.faces)
+    return faces
+
+
+def _lazy_loop(face, lp, tol: float, gap_tol: float, out: list) -> None:
+    ends, free = [], []
+    for i, piece in enumerate(lp.pieces):
+        if isinstance(piece, IntersectionCurve):
+            if face.surface is not piece.a and face.surface is not piece.b:
+                out.append(error("E0509", f"loop piece {i + 1} is an intersection of other surfaces, not of the "
+                                          "trimmed one", _span(piece, lp), "not on this face"))
+                return
+            try:
+                branches = piece.approximate(tol)
+            except GeometryError as exc:
+                out.append(error("E0508", f"loop piece {i + 1}: {exc}", _span(piece, lp), "cannot be approximated"))
+                return
+            if len(branches) != 1:
+                out.append(error("E0508", f"loop piece {i + 1} is an intersection with {len(branches)} branches; "
+                                          "a loop piece needs exactly one", _span(piece, lp),
+                                 f"{len(branches)} branches"))
+                return
+            c = branches[0].curve
+            ends.append(tuple(c.evaluate(np.array(c.domain))))
+            free.append(True)
+        else:
+            ends.append(_ends3(face.surface, piece))
+            free.append(False)
+    _chain(face, lp, ends, free, gap_tol, out)
+
+
+def _chain(face, lp, ends, free, tol, out) -> None:
+    """Walk the pieces end to start; a `free` piece may be reversed silently, a fixed one with W0505."""
+    k = len(ends)
+    order = [list(e) for e in ends]
+    if free[0] and k > 1:  # orient a free first piece towards the second
+        nxt = order[1]
+        if min(np.linalg.norm(order[0][0] - q) for q in nxt) < min(np.linalg.norm(order[0][1] - q) for q in nxt):
+            order[0].reverse()
+    for i in range(k):
+        j = (i + 1) % k
+        end_i = order[i][1]
+        if np.linalg.norm(end_i - order[j][0]) <= tol:
+            continue
+        if j != 0 and np.linalg.norm(end_i - order[j][1]) <= tol:
+            order[j].reverse()
+            if not free[j]:
+                out.append(warning("W0505", f"loop piece {j + 1} runs backwards: its end meets piece {i + 1}",
+                                   _span(lp.pieces[j], lp), "reversed piece", hint="swap its end points"))
+            continue
+        gap = float(np.linalg.norm(end_i - order[j][0]))
+        where = "its last piece and its first" if j == 0 else f"pieces {i + 1} and {j + 1}"
+        out.append(error("E0504", f"trimming loop is not closed: a gap of {gap:.3g} between {where} "
+                                  f"(tolerance {tol:g})", _span(lp, face), "open loop"))
+        return
 
 
 def _visit(obj, tol: float, out: list, seen: set) -> None:
@@ -159,24 +244,7 @@ def _loop(face: O.TrimmedFace, lp: O.Loop, tol: float, out: list) -> None:
     out.extend(problems)
     if problems:
         return  # closure is meaningless until the pieces are on the surface
-    ends = [_ends3(surface, p) for p in lp.pieces]
-    k = len(ends)
-    flipped: set[int] = set()
-    for i in range(k):
-        j = (i + 1) % k
-        end_i = ends[i][0] if i in flipped else ends[i][1]
-        gap = float(np.linalg.norm(end_i - ends[j][0]))
-        if gap <= tol:
-            continue
-        if j != 0 and np.linalg.norm(end_i - ends[j][1]) <= tol:
-            flipped.add(j)
-            out.append(warning("W0505", f"loop piece {j + 1} runs backwards: its end meets piece {i + 1}",
-                               _span(lp.pieces[j], lp), "reversed piece", hint="swap its end points"))
-            continue
-        where = "its last piece and its first" if j == 0 else f"pieces {i + 1} and {j + 1}"
-        out.append(error("E0504", f"trimming loop is not closed: a gap of {gap:.3g} between {where} "
-                                  f"(tolerance {tol:g})", _span(lp, face), "open loop"))
-        break
+    _chain(face, lp, [_ends3(surface, p) for p in lp.pieces], [False] * len(lp.pieces), tol, out)
 
 
 def _inside_domain(surface, piece, i: int, tol: float, lp) -> Diagnostic | None:

@@ -142,6 +142,10 @@ def run(args) -> int:
         model, diagnostics = compile_text(text, args.file, params)
     except Exception as exc:  # noqa: BLE001 - a compiler crash is reported, never a traceback
         model, diagnostics = None, [internal_error(args.file, exc)]
+    if model is not None:  # loops with intersections are checked once those are approximated
+        diagnostics = diagnostics + _lazy_diagnostics(model, args.tol)
+        if any(d.is_error for d in diagnostics):
+            model = None
     if diagnostics:
         emit(diagnostics, {args.file: text}, "text")
         print(summary(diagnostics), file=sys.stderr)
@@ -168,6 +172,18 @@ def run(args) -> int:
         print(f"rgmc compile: error: cannot create {out.parent}: {exc.strerror}", file=sys.stderr)
         return 1
     return _write(writer, model, out, kwargs, args.target, existed)
+
+
+def _lazy_diagnostics(model, tol) -> list:
+    from rgm.errors import RgmError
+    from rgm.model.validate import validate_lazy
+
+    try:
+        return validate_lazy(model, tol)
+    except RgmError as exc:
+        from rgm.compiler.diagnostics import error
+
+        return [error("E0508", f"an intersection could not be approximated: {exc}", None)]
 
 
 def _write(writer, model, out: Path, kwargs: dict, target: str, existed: bool) -> int:

@@ -16,7 +16,7 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 HAND_LIKE = """
 units mm;
 tolerance 0.01;
-param cut_at := 10mm;
+param cut_at := 27mm;
 palm := bsurface(degree_u: 3, degree_v: 3, knots_u: uniform(3, 4), knots_v: uniform(3, 4),
                  net: net 4 x 4 [0 0 0, 0 30 1, 0 60 1, 0 90 0,
                                  30 0 2, 30 30 4, 30 60 4, 30 90 2,
@@ -80,7 +80,7 @@ def test_approximate_is_cached_per_tolerance_and_tighter_is_better(monkeypatch):
         worst = 0.0
         for br in branches:
             pts = br.curve.evaluate(np.linspace(*br.curve.domain, 400))
-            worst = max(worst, palm.closest_point(pts)[3].max(), np.abs(pts[:, 1] - 10.0).max())
+            worst = max(worst, palm.closest_point(pts)[3].max(), np.abs(pts[:, 1] - 27.0).max())
         return worst
 
     e_coarse, e_fine = true_error(coarse), true_error(fine)
@@ -114,3 +114,25 @@ def test_transformed_face_keeps_the_intersection_on_its_surface():
     (branch,) = piece.approximate(1e-3)
     assert np.allclose(branch.curve.evaluate(np.array([0.5]))[0][2] - 5.0,
                        model["wrist"].approximate(1e-3)[0].curve.evaluate(np.array([0.5]))[0][2], atol=2e-3)
+
+
+def test_compile_checks_lazy_loops_once_approximated(tmp_path, monkeypatch, capsys):
+    import sys
+    import types
+
+    from rgm.cli import main
+    from rgm.commands import compile as compile_cmd
+
+    written = []
+    fake = types.ModuleType("rgm.backends._lazyfake")
+    fake.write_fake = lambda model, path, **opts: written.append(model["wrist"].computed)
+    monkeypatch.setitem(sys.modules, "rgm.backends._lazyfake", fake)
+    monkeypatch.setitem(compile_cmd.TARGETS, "iges", ("rgm.backends._lazyfake", "write_fake", {}))
+    src = tmp_path / "hand.rgm"
+    src.write_text(HAND_LIKE)
+    assert main(["compile", str(src), "-t", "iges", "-o", str(tmp_path / "h.igs")]) == 0
+    assert written == [(0.01,)], "approximated once, at the model tolerance, before the back end ran"
+    # the wrist cut moved away from where the side lines start: the loop no longer closes
+    assert main(["compile", str(src), "-t", "iges", "-o", str(tmp_path / "h.igs"), "-D", "cut_at=10"]) == 1
+    out = capsys.readouterr().out
+    assert "E0504" in out and "not closed" in out and len(written) == 1
