@@ -7,7 +7,8 @@ of 30 MB costs about one `str.split` plus one float conversion:
      anything else: an error);
   2. number starts (a number character after a non-number one) are counted per entry (entries are
      separated by commas) with np.bincount: every entry must hold the same count `width`;
-  3. the numbers are converted by numpy (`np.array(body.replace(',', ' ').split(), float)`).
+  3. the numbers are converted by numpy's C reader (`np.fromstring(body.replace(',', ' '), sep=' ')`),
+     which is strict on malformed numbers; any doubt is settled token by token with float().
 Errors come back as `NetError(message, start, end, hint)` with offsets into the token text.
 """
 from __future__ import annotations
@@ -78,7 +79,11 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
         raise NetError(f"`net {dims}` needs {expected} entries, found {counts.size}", 0, len(text),
                        "one entry per control point, row after row, separated by `,`")
     try:
-        data = np.array(body.replace(",", " ").split(), dtype=float)
+        # numpy's C reader raises on anything strtod cannot read up to a blank ("1.2.3", "1e", "-");
+        # the size check catches a token read as two numbers ("1-2")
+        data = np.fromstring(body.replace(",", " "), dtype=float, sep=" ")
+        if data.size != int(counts.sum()):
+            raise ValueError("a token was read as several numbers")
     except ValueError:
         for m in _TOKEN.finditer(body):
             try:
@@ -86,7 +91,8 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
             except ValueError:
                 raise NetError(f"`{m.group()}` is not a number", body_start + m.start(),
                                body_start + m.end()) from None
-        raise  # unreachable: numpy and float() accept the same spellings
+        # not expected (every token float() accepts, numpy reads as one number); never a traceback
+        raise NetError("the numbers of this net could not be read", 0, len(text)) from None
     if not np.isfinite(data).all():
         m = next(m for m in _TOKEN.finditer(body) if not np.isfinite(float(m.group())))
         raise NetError(f"`{m.group()}` is too large for a 64-bit float", body_start + m.start(),
