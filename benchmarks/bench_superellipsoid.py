@@ -49,7 +49,8 @@ def errors(fit, truth, rng):
 
 
 def recovery(cases: int, n: int):
-    print(f"superellipsoid recovery: {cases} random shapes x {n} points, 1 % noise")
+    print(f"superellipsoid recovery: {cases} random shapes x {n} points, 1 % noise "
+          f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores: times scale with it)")
     print(f"{'data':<16}{'method':<8}{'time ms (median)':>18}{'surface % (med/max)':>22}"
           f"{'size % (med/max)':>19}{'eps (med/max)':>16}")
     for label, outliers in (("clean", 0.0), ("5 % outliers", 0.05)):
@@ -69,7 +70,8 @@ def recovery(cases: int, n: int):
             print(f"{label:<16}{name:<8}{1e3 * np.median(r[:, 0]):>18.1f}"
                   f"{100 * np.median(r[:, 1]):>11.2f} /{100 * np.max(r[:, 1]):>7.2f}"
                   f"{100 * np.median(r[:, 2]):>10.2f} /{100 * np.max(r[:, 2]):>6.1f}"
-                  f"{np.nanmedian(r[:, 3]):>9.3f} /{np.nanmax(r[:, 3]):>5.2f}")
+                  + (f"{np.nanmedian(r[:, 3]):>9.3f} /{np.nanmax(r[:, 3]):>5.2f}" if np.isfinite(r[:, 3]).any()
+                     else f"{'n/a (other axis)':>16}"))
         ratio = np.median(np.array(rows["plain"])[:, 1]) / np.median(np.array(rows["rgm"])[:, 1])
         print(f"{'':<16}plain / rgm median surface error: {ratio:.1f}x")
 

@@ -28,11 +28,11 @@ def box_fit():
     pts = np.vstack(views)
     pts = pts[~statistical_outliers(pts)]
     _, extents = trimesh.bounds.oriented_bounds(mesh)
-    return fit_points(pts, tol=1.0, title="cracker_box"), np.sort(extents)
+    return fit_points(pts, tol=1.0, title="cracker_box"), np.sort(extents), pts
 
 
 def test_cracker_box_is_a_box_with_its_obb_dimensions(box_fit):
-    result, obb = box_fit
+    result, obb, _ = box_fit
     part = result.report["parts"][0]
     assert part["category"] == "box" and part["confidence"] > 0.5
     dims = np.sort([part["params"][k] for k in ("width", "depth", "height")])
@@ -44,9 +44,29 @@ def test_cracker_box_file_checks_and_evaluates(box_fit):
     from rgm.compiler.parser import parse
     from rgm.fitters.certificate import shape_from_model
 
-    result, _ = box_fit
+    result, _, _ = box_fit
     program, diags = parse(result.text, "box.rgm")
     assert [d for d in diags if d.is_error] == [] and [d for d in check(program).diagnostics if d.is_error] == []
     model = rgm.loads(result.text)
     shape = shape_from_model(model.objects["cracker_box"])
     assert np.allclose(np.sort(shape.dimensions), np.sort(result.parts[0].ideal.dimensions), atol=1e-3)
+
+
+def test_verify_keeps_an_honest_failing_certificate_and_catches_an_edit(box_fit, tmp_path):
+    """The carton bulges by up to ~7 mm, so the 1 mm certificate of its box does not hold and says so;
+    `rgmc verify` accepts the file as fitted and rejects it once a dimension is edited by 2 mm."""
+    import re
+
+    from rgm.cli import main
+    from rgm.fitters.io import write_ply
+
+    result, _, pts = box_fit
+    assert not result.certificates[0].holds and result.certificates[0].p95 > 1.0
+    scan = tmp_path / "box.ply"
+    write_ply(scan, pts)
+    good, edited = tmp_path / "box.rgm", tmp_path / "edited.rgm"
+    good.write_text(result.text)
+    width = float(re.search(r"param width := ([0-9.]+)mm;", result.text).group(1))
+    edited.write_text(result.text.replace(f"param width := {width:.4f}mm;", f"param width := {width + 2:.4f}mm;"))
+    assert main(["verify", str(good), str(scan)]) == 0
+    assert main(["verify", str(edited), str(scan)]) == 1
