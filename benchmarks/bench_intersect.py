@@ -99,6 +99,9 @@ def main() -> None:
         print("OpenCASCADE (OCP) not installed: printing rgm alone (pip install cadquery to compare)")
     cases = [("surface-surface", patch(1, 0.0, False), patch(2, 0.9, True).swap_uv(), None),
              ("surface-plane", patch(3, 0.0, True), None, (np.array([5.0, 5.0, 0.0]), np.array([0.3, -0.2, 1.0])))]
+    rgm_run(cases[0][1], cases[0][2], None, 1e-1)  # warm up imports and caches on both sides
+    if have_occ:
+        occ_run(cases[0][1], cases[0][2], None, 1e-1)
     print(f"{'case':16} {'tol':>7} {'rgm s':>8} {'rgm err':>9} {'br':>3} | {'occ s':>8} {'occ err':>9} {'br':>3} | ratio")
     for name, sa, sb, plane in cases:
         surfaces = [sa] if sb is None else [sa, sb]
