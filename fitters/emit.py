@@ -10,8 +10,9 @@ certificate is measured on exactly the model the file describes.
 
 Revolutions (the paper's pin, Figure 7): profile in the part's x-y plane (x = radius, y = along the axis
 from 0 to `length`), revolved about the y axis.  Named dimensions: `radius` (the longest axis-parallel
-line), `length` (the profile's extent along the axis) and `chamfer` (45-degree lines joining the radius
-to an end face, when all are equal); other vertex coordinates are written as numbers.
+line), `length` (the profile's extent along the axis), `chamfer` (45-degree lines joining the radius
+to an end face, when all are equal) and, per rectangular groove k, `groovek_at`, `groovek_width` and
+`groovek_depth`; other vertex coordinates are written as numbers.
 Boxes: a rectangle `base` in the part's x-y plane extruded along z by `height`, with trimmed planes as
 bottom and top, as one `shell`; named dimensions `width` (x), `depth` (y), `height` (z).
 """
@@ -90,11 +91,33 @@ def _revolution_dims(profile: Profile, suffix: str, snap: float):
         if s.kind == "line" and touches and dr > 0 and abs(dr - dz) < 0.02 * max(dr, dz):
             chamfers.append((dr + dz) / 2)
     r_cands, z_cands = [(f"radius{suffix}", radius)], [("0", 0.0), (f"length{suffix}", length)]
+    for k, (before, bottom, after) in enumerate(_grooves(segs, radius, dims.snap), 1):
+        g = f"groove{k}{suffix}"
+        at = dims.add(f"{g}_at", min(bottom.p0[1], bottom.p1[1]))
+        width = dims.add(f"{g}_width", abs(bottom.p1[1] - bottom.p0[1]))
+        depth = dims.add(f"{g}_depth", radius - bottom.p0[0])
+        r_cands.append((f"radius{suffix} - {g}_depth", round(radius - depth, _DEC)))
+        z_cands += [(f"{g}_at", at), (f"{g}_at + {g}_width", round(at + width, _DEC))]
     if chamfers and np.ptp(chamfers) <= dims.snap:
         c = dims.add("chamfer" + suffix, np.mean(chamfers))
         r_cands.append((f"radius{suffix} - chamfer{suffix}", round(radius - c, _DEC)))
         z_cands += [(f"chamfer{suffix}", c), (f"length{suffix} - chamfer{suffix}", round(length - c, _DEC))]
     return dims, r_cands, z_cands
+
+
+def _grooves(segs, radius, snap):
+    """(wall, bottom, wall) triples of rectangular grooves: an axis-parallel line below `radius`
+    between two lines across the axis that both reach `radius`."""
+    def across(s):
+        return s.kind == "line" and abs(s.p1[1] - s.p0[1]) < 1e-9
+
+    out = []
+    for a, b, c in zip(segs, segs[1:], segs[2:]):
+        if (b.kind == "line" and abs(b.p1[0] - b.p0[0]) < 1e-9 and b.p0[0] < radius - snap
+                and across(a) and across(c) and abs(max(a.p0[0], a.p1[0]) - radius) <= snap
+                and abs(max(c.p0[0], c.p1[0]) - radius) <= snap):
+            out.append((a, b, c))
+    return out
 
 
 def _revolution_part(fit: RevolutionFit, name: str, suffix: str, snap: float) -> EmittedPart:

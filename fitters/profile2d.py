@@ -4,7 +4,7 @@
 straight lines and circular arcs by sequential RANSAC (Fischler & Bolles 1981) with least-squares
 refinement (total least squares for lines; the geometric circle fit, Chernov 2010 ch. 4, for arcs), keeps
 for every primitive only its largest contiguous run of inliers, snaps lines within `angle_tol` of the
-axis directions to exact axis-parallel/perpendicular lines (a designer's intent: a cylinder is r = R), and
+axis directions (or whose ends would move by less than 2 thr) to exact axis-parallel/perpendicular lines (a designer's intent: a cylinder is r = R), and
 chains the pieces from axis to axis, each vertex the intersection of neighbouring primitives (so
 dimensions come from whole faces, not from noisy corner points).
 
@@ -123,10 +123,12 @@ def _largest_run(t, gap):
     return order[starts[k]:stops[k]]
 
 
-def _snap(p, d, inl, angle_tol):
-    """Axis-parallel (r = const) or perpendicular (z = const) lines within angle_tol become exact."""
+def _snap(p, d, inl, angle_tol, thr):
+    """Axis-parallel (r = const) or perpendicular (z = const) lines become exact when within angle_tol
+    or when their ends would move by less than 2 thr (short faces: a groove's wall seen by few points)."""
+    length = np.ptp(inl @ d)
     for axis in (0, 1):
-        if abs(d[axis]) < np.sin(angle_tol):
+        if abs(d[axis]) < np.sin(angle_tol) or abs(d[axis]) * length < 2 * thr:
             d = np.eye(2)[1 - axis]
             p = np.where(np.arange(2) == axis, inl[:, axis].mean(), inl.mean(axis=0))
             return p, d
@@ -172,7 +174,7 @@ def _extract_pieces(q, thr, gap, angle_tol, min_support, rng):
             if len(inl) < 3:
                 break
             if kind == "line":
-                params = _snap(*_line_tls(q[inl]), q[inl], angle_tol)
+                params = _snap(*_line_tls(q[inl]), q[inl], angle_tol, thr)
             else:
                 params = _circle_fit(q[inl], *params)
         if len(inl) < min_support:
@@ -194,7 +196,7 @@ def _extract_pieces(q, thr, gap, angle_tol, min_support, rng):
         if kind == "arc":  # an arc whose sagitta over its run is within the threshold is a line
             half = np.linalg.norm(ends[1] - ends[0]) / 2
             if params[1] - np.sqrt(max(params[1] ** 2 - half ** 2, 0.0)) < 2 * thr and np.ptp(trun) < params[1] * np.pi:
-                kind, params = "line", _snap(*_line_tls(q[run]), q[run], angle_tol)
+                kind, params = "line", _snap(*_line_tls(q[run]), q[run], angle_tol, thr)
                 t = (q[run] - params[0]) @ params[1]
                 lo, hi = np.percentile(t, [0.5, 99.5])
                 ends = q[run][[np.argmin(np.abs(t - lo)), np.argmin(np.abs(t - hi))]]
@@ -290,7 +292,7 @@ def fit_conic_profile(rz, *, thr: float, angle_tol: float = np.radians(1.0), clo
     """Lines and circular arcs through noisy profile points rz (n, 2) = (r, z).
 
     thr : inlier distance (model units), about 3 noise sigmas.  Pieces need a contiguous run of at least
-    max(20, 1 %) of the points; gaps longer than 4 % of the profile's extent end a run.  With
+    max(20, 0.25 %) of the points; gaps longer than 4 % of the profile's extent end a run.  With
     `close_to_axis` a chain end within 5 % of the extent from r = 0 is extended to the axis.
     """
     rz = np.asarray(rz, float)
@@ -298,7 +300,7 @@ def fit_conic_profile(rz, *, thr: float, angle_tol: float = np.radians(1.0), clo
         raise GeometryError(f"a profile needs at least 20 points, got {len(rz)}")
     extent = float(np.ptp(rz, axis=0).max())
     rng = np.random.default_rng(seed)
-    pieces = _extract_pieces(rz, thr, 0.04 * extent, angle_tol, max(20, len(rz) // 100), rng)
+    pieces = _extract_pieces(rz, thr, 0.04 * extent, angle_tol, max(20, len(rz) // 400), rng)
     if not pieces:
         raise GeometryError("no line or arc explains the profile points")
     chain = _merge_collinear(_order(pieces, float(np.median(rz[:, 1]))), thr, angle_tol)

@@ -83,11 +83,13 @@ def scan_views(hit_fn, directions, centre, size, *, pitch, noise, outliers, seed
     return views
 
 
-def pin_views(*, chamfer=0.0, noise=0.03, outliers=0.05, seed=0, pose=np.eye(4), pitch=0.75):
-    """Several range views of the paper's pin (axis along y), three around the axis and two oblique views
-    that see the end caps."""
-    prof = pin_profile(chamfer=chamfer)
+def pin_views(*, chamfer=0.0, noise=0.03, outliers=0.05, seed=0, pose=np.eye(4), pitch=0.75, profile=None):
+    """Several range views of the paper's pin (axis along y; or of another revolved `profile`), three
+    around the axis, two oblique views that see the end caps and two that look into grooves."""
+    prof = pin_profile(chamfer=chamfer) if profile is None else profile
     dirs = [(1, 0.35, 0), (-0.5, -0.35, 0.87), (-0.5, 0.3, -0.87), (0.3, 1.2, 0.2), (-0.2, -1.2, -0.3)]
+    if profile is not None:
+        dirs += [(1, -0.5, 0.2), (-1, 0.5, -0.3)]
     return scan_views(lambda o, d: raycast_revolved(prof, o, d), dirs, np.array([0, PIN_LENGTH / 2, 0]),
                       PIN_LENGTH / 2 + 10, pitch=pitch, noise=noise, outliers=outliers, seed=seed, pose=pose)
 

@@ -125,3 +125,17 @@ def test_pin_compiles_to_step(fitted_pin, tmp_path):
     step = tmp_path / "pin.step"
     assert main(["compile", str(out), "-t", "step", "-o", str(step)]) == 0
     assert step.read_text().startswith("ISO-10303-21;")
+
+
+def test_grooved_pin_gets_groove_params(tmp_path):
+    r, length = PIN_RADIUS, PIN_LENGTH
+    profile = np.array([[0, 0], [r, 0], [r, 40], [r - 4, 40], [r - 4, 52], [r, 52], [r, length], [0, length]])
+    views = _write_views(tmp_path, pin_views(profile=profile, seed=3))
+    out = tmp_path / "grooved.rgm"
+    assert main(["fit", *views, "--tol", "0.1", "-o", str(out)]) == 0
+    text = out.read_text()
+    for name, value in (("radius", r), ("length", length), ("groove1_at", 40.0), ("groove1_width", 12.0),
+                        ("groove1_depth", 4.0)):
+        assert abs(_param(text, name) - value) < 0.05, name
+    _check_clean(text)
+    assert main(["verify", str(out), *views]) == 0
