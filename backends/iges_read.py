@@ -1,7 +1,7 @@
 """IGES → model objects: a tolerant reader for files from rgm and from other systems.
 
-Supported entities: 100 arc/circle, 102 composite, 106 forms 11/12/13/63 (polylines), 110 line (form 0),
-116 point, 120 surface of revolution, 124 transformation (applied through DE field 7), 126 and 128
+Supported entities: 100 arc/circle, 102 composite, 106 forms 11/12/13/63 (polylines), 108 form 0
+(unbounded plane), 110 line (form 0), 112/114 parametric splines (exact B-splines), 116 point, 120 surface of revolution, 124 transformation (applied through DE field 7), 126 and 128
 (rational B-splines; parameter sub-ranges are split off exactly), 142 curve on surface, 144 trimmed
 surface, 402 forms 1/7 (group → shell), 406 form 15 (names) and 314 (colour, read and ignored: the
 model has no colours). Anything else is reported by type, form and DE number (`IgesImport.unsupported`);
@@ -30,7 +30,7 @@ from .iges_parse import IgesData, parse_iges
 
 __all__ = ["IgesImport", "read_iges", "read_iges_file", "SUPPORTED"]
 
-SUPPORTED = {0, 100, 102, 106, 108, 110, 116, 120, 124, 126, 128, 142, 144, 314, 402, 406}
+SUPPORTED = {0, 100, 102, 106, 108, 110, 112, 114, 116, 120, 124, 126, 128, 142, 144, 314, 402, 406}
 _NOT_OBJECTS = {0, 124, 314, 406}
 #: unit lengths in mm of IGES units the language does not have (converted to mm on import)
 _TO_MM = {"ft": 304.8, "mi": 1609344.0, "km": 1e6, "mil": 0.0254, "um": 1e-3, "uin": 2.54e-5}
@@ -76,6 +76,11 @@ class _Reader:
         fixed = {100: 7, 110: 6, 116: 4, 120: 4, 124: 12, 142: 5, 314: 4}
         if t in fixed:
             return fixed[t]
+        if t == 112:
+            return 4 + (d.int(de, 4) + 1) * 13
+        if t == 114:
+            m, n = d.int(de, 3), d.int(de, 4)
+            return 4 + (m + 1) + (n + 1) + 48 * (m + 1) * (n + 1)
         if t in (102, 402):
             return 1 + d.int(de, 1)
         if t == 144:
@@ -201,10 +206,11 @@ class _Reader:
         return CircularArc(c, [0.0, 0.0, 1.0], radius, s, e)
 
     def _e102(self, de, dim):
-        members = self.d.ints(de, 2, self.d.int(de, 1))
-        if not members:
-            raise GeometryError("composite curve with no members")
-        return CompositeCurve(tuple(self.get(m, dim) for m in members))
+        members = [self.get(m, dim) for m in self.d.ints(de, 2, self.d.int(de, 1))]
+        curves = tuple(m for m in members if not isinstance(m, Point))  # 116 members only mark joints
+        if not curves:
+            raise GeometryError("composite curve with no curve members")
+        return CompositeCurve(curves)
 
     def _e106(self, de, dim):
         e, d = self.d.entries[de], self.d
@@ -270,6 +276,25 @@ class _Reader:
         p = np.array([self.d.real(de, 6), self.d.real(de, 7), self.d.real(de, 8)])
         origin = p - ((n @ p - dd) / nn) * n
         return Plane(origin, n)
+
+    def _e112(self, de, dim):
+        """Parametric spline curve: N cubic segments between N+1 breakpoints (exact B-spline)."""
+        from .iges_legacy import spline_curve
+
+        n = self.d.int(de, 4)
+        breaks = self.d.reals(de, 5, n + 1)
+        coef = self.d.reals(de, 6 + n, 12 * n).reshape(n, 3, 4)
+        return BSplineCurve(spline_curve(breaks, coef, dim))
+
+    def _e114(self, de, dim):
+        """Parametric spline surface: M x N bicubic patches (exact B-spline surface)."""
+        from .iges_legacy import spline_surface
+
+        m, n = self.d.int(de, 3), self.d.int(de, 4)
+        tu = self.d.reals(de, 5, m + 1)
+        tv = self.d.reals(de, 6 + m, n + 1)
+        sets = self.d.reals(de, 7 + m + n, 48 * (m + 1) * (n + 1)).reshape(m + 1, n + 1, 3, 16)
+        return BSplineSurface(spline_surface(tu, tv, sets[:m, :n]))
 
     def _e120(self, de, dim):
         axis_de, gen_de = self.d.ints(de, 1, 2)
@@ -390,8 +415,8 @@ def read_iges(text: str, source: str | None = None) -> IgesImport:
     units = g.units or "mm"
     objects: dict = {}
     exports = []
-    kinds = {100: "curve", 102: "curve", 106: "curve", 110: "curve", 126: "curve", 142: "curve", 116: "point",
-             108: "plane", 120: "surface", 128: "surface", 144: "face", 402: "shell"}
+    kinds = {100: "curve", 102: "curve", 106: "curve", 110: "curve", 112: "curve", 126: "curve", 142: "curve",
+             116: "point", 108: "plane", 114: "surface", 120: "surface", 128: "surface", 144: "face", 402: "shell"}
     for de in reader.roots():
         e = data.entries[de]
         try:
@@ -414,15 +439,15 @@ def read_iges(text: str, source: str | None = None) -> IgesImport:
     gap = _loop_gap(objects.values())
     if gap > reader.tol:
         notes.append(f"model-space trimming curves lie up to {gap:.3g} from their surfaces, more than the "
-                     f"file's resolution {reader.tol:g}; the model tolerance is set to {1.5 * gap:.3g}")
-        reader.tol = 1.5 * gap
+                     f"file's resolution {reader.tol:g}; the model tolerance is set to {2 * gap:.3g}")
+        reader.tol = 2 * gap
     model = Model(units, reader.tol, objects, tuple(exports), {}, source)
     return IgesImport(model, sorted(reader.unsupported.values(), key=lambda t: t[2]),
                       [reader.problems[k] for k in sorted(reader.problems)], notes)
 
 
 def _loop_gap(objects) -> float:
-    """Largest distance (model units) from a model-space loop piece to its face's surface (9 samples
+    """Largest distance (model units) from a model-space loop piece to its face's surface (65 samples
     per piece), over the trimmed faces among `objects` (shells included)."""
     gap = 0.0
     for obj in objects:
@@ -437,7 +462,7 @@ def _loop_gap(objects) -> float:
                     pieces = piece.pieces if isinstance(piece, CompositeCurve) else (piece,)
                     for p in pieces:
                         c = p.nurbs()
-                        pts = c.evaluate(np.linspace(*c.domain, 9))
+                        pts = c.evaluate(np.linspace(*c.domain, 65))
                         gap = max(gap, float(face.surface.nurbs().closest_point(pts)[3].max()))
     return gap
 

@@ -37,6 +37,7 @@ def test_sample_imports_or_names_what_it_does_not_support(path):
 
 @pytest.mark.skipif(not SAMPLES, reason="shared IGES samples not present")
 @pytest.mark.parametrize("name", ["120-000.igs", "126-000.igs", "128-002.igs", "142-000.igs", "144-000-example-2.igs",
+                                  "144-000.igs", "114-000.igs", "112-000.igs",
                                   "124-001.igs", "106-012.igs", "100-000.igs", "102-000.igs"])
 def test_rgmc_import_writes_rgm_that_compiles(tmp_path, capsys, name):
     import rgm
