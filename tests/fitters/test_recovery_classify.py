@@ -50,3 +50,10 @@ def test_free_form_part_is_reported_not_modelled():
     result = fit_points(pts, tol=0.5)
     assert result.parts == [] and "free_form" in result.report["notes"][0]
     assert "not modelled" in result.text
+
+
+def test_provenance_date_follows_source_date_epoch(monkeypatch):
+    from rgm.fitters.emit import provenance_date
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "0")
+    assert provenance_date() == "1970-01-01T00:00:00Z"
