@@ -182,13 +182,15 @@ def _principal_axis_rotations(src, dst):
 
 
 def coarse_align(source, target, target_normals, source_normals=None, *, target_weights=None,
-                 tree: cKDTree | None = None,
+                 tree: cKDTree | None = None, anchors=None,
                  n_rotations: int = 600, n_sample: int = 100, keep: float = 0.6, steps: int = 8,
                  finalists: int = 10, prune_at=(4, 6), seed: int = 0) -> tuple[np.ndarray, IcpResult]:
     """Initial pose of source (n, 3) on target (m, 3) without any prior: sampled rotation search scored by
     the trimmed (fraction `keep`) point-to-point residual of matches whose normals agree (both views'
     normals face their sensors, so a back-to-front match has opposite normals), finished by `icp`.
-    Returns (transform, result of the winning icp)."""
+    anchors : (k, 3) places on the target where the source's centroid may land (default: the target's
+    centroid; a multi-view model passes each view's centroid too, since a new view overlaps only part
+    of it). Returns (transform, result of the winning icp)."""
     source = np.asarray(source, float)
     tree = tree or cKDTree(target)
     rng = np.random.default_rng(seed)
@@ -203,8 +205,10 @@ def coarse_align(source, target, target_normals, source_normals=None, *, target_
     bound = 0.5 * float(np.sqrt(((small - small.mean(axis=0)) ** 2).sum(axis=1).mean()))
     rots = np.concatenate([np.eye(3)[None], _principal_axis_rotations(source, target),
                            _uniform_rotations(n_rotations, rng)])
-    cs, ct = source.mean(axis=0), target.mean(axis=0)
-    R, t = rots, ct - rots @ cs
+    cs = source.mean(axis=0)
+    anchors = target.mean(axis=0)[None] if anchors is None else np.asarray(anchors, float).reshape(-1, 3)
+    R = np.tile(rots, (len(anchors), 1, 1))
+    t = np.repeat(anchors, len(rots), axis=0) - R @ cs
     m = int(keep * len(sample))
     for step in range(steps):                                                  # batched trimmed ICP
         p = np.einsum("nij,kj->nki", R, sample) + t[:, None, :]
@@ -215,7 +219,7 @@ def coarse_align(source, target, target_normals, source_normals=None, *, target_
         q = small[j]
         order = np.argsort(d, axis=1)
         if step in prune_at:                                                   # prune the hopeless
-            alive = np.argsort(np.take_along_axis(d, order[:, :m], 1).mean(axis=1))[: max(4 * finalists, len(R) // 3)]
+            alive = np.argsort(np.take_along_axis(d, order[:, :m], 1).mean(axis=1))[: max(4 * finalists, len(R) // 4)]
             R, t, p, q, d, order = R[alive], t[alive], p[alive], q[alive], d[alive], order[alive]
         sel = order[:, :m]
         ps = np.take_along_axis(p, sel[..., None], 1)
@@ -265,8 +269,8 @@ def tight_overlap(source, transform, target, target_normals, tree: cKDTree, nois
 
 @dataclass
 class ViewReport:
-    """One view's registration: pose (4, 4) view-to-common-frame, RMS residual, overlap fraction,
-    iterations, status ("reference", "ok", or the first failed check) and every failed check in reasons."""
+    """One view's registration: pose (4, 4) view-to-common-frame, RMS residual, overlap fraction (near the
+    model), inlier fraction (on the model's surface within the noise), iterations, status ("reference", "ok", or the first failed check) and every failed check in reasons."""
 
     source: str
     transform: np.ndarray
@@ -274,20 +278,26 @@ class ViewReport:
     overlap: float = 1.0
     iterations: int = 0
     condition: float = 1.0
+    inliers: float = 1.0
     status: str = "reference"
     reasons: list = field(default_factory=list)
 
     def to_json(self) -> dict:
         return {"file": self.source, "transform": np.round(self.transform, 12).tolist(),
                 "rms": self.rms if np.isfinite(self.rms) else None,
-                "overlap": self.overlap, "iterations": self.iterations, "condition": self.condition,
+                "overlap": self.overlap, "inliers": self.inliers, "iterations": self.iterations,
+                "condition": self.condition,
                 "status": self.status, "reasons": self.reasons}
 
 
-def _judge(res: IcpResult, noise: float, min_overlap: float, min_condition: float) -> list[str]:
+def _judge(res: IcpResult, inliers: float, noise: float, min_overlap: float, min_condition: float) -> list[str]:
+    """The reasons not to trust a registration (empty: trust it). `inliers` is the fraction of the view
+    lying on the model's tangent planes within 3 noise levels: a wrong pose can keep a fair overlap at
+    a few point spacings, never many points on the surface."""
     reasons = []
-    if res.overlap < min_overlap:
-        reasons.append(f"low_overlap: only {res.overlap:.0%} of the view matches the model (< {min_overlap:.0%})")
+    if res.overlap < min_overlap or inliers < 0.5 * min_overlap:
+        reasons.append(f"low_overlap: {res.overlap:.0%} of the view is near the model and {inliers:.0%} on it "
+                       f"(need {min_overlap:.0%} and {0.5 * min_overlap:.0%})")
     if res.condition < min_condition:
         names = ["rotation x", "rotation y", "rotation z", "translation x", "translation y", "translation z"]
         weak = names[int(np.argmax(np.abs(res.weak_direction)))]
@@ -306,6 +316,7 @@ def register_views(scans: list[Scan], *, use_poses: bool = False, refine: bool =
 
     use_poses : start every view from its `pose` (e.g. read from a .conf) instead of a coarse search.
     refine : after the incremental pass, re-register each view against all the others once more.
+    Views that fail a check are reported and kept out of the model the later views register against.
     Returns one `ViewReport` per view; `transform` is the view's pose in the first view's frame.
     """
     if not scans:
@@ -328,30 +339,43 @@ def register_views(scans: list[Scan], *, use_poses: bool = False, refine: bool =
         nrm = np.concatenate([normals[i] @ poses[i][:3, :3].T for i in indices])
         return pts, nrm, np.concatenate([weights[i] for i in indices])
 
+    trusted = [0]                            # the model constructed so far: views whose pose is trusted
     for i in range(1, len(scans)):
-        tgt, tgt_n, tgt_w = model(range(i))
+        tgt, tgt_n, tgt_w = model(trusted)
         tree = cKDTree(tgt)
+        centres = [tgt.mean(axis=0)] + [poses[k][:3, :3] @ scans[k].points.mean(axis=0) + poses[k][:3, 3]
+                                        for k in trusted] if len(trusted) > 1 else None
         if use_poses:
             res = icp(scans[i].points, tgt, tgt_n, poses[i], source_normals=normals[i], target_weights=tgt_w,
                       tree=tree, seed=seed)
         else:
             _, res = coarse_align(scans[i].points, tgt, tgt_n, normals[i], target_weights=tgt_w, tree=tree,
-                                  seed=seed + i)
+                                  anchors=centres, seed=seed + i)
         poses[i] = res.transform
         reports.append(ViewReport(scans[i].source, res.transform, res.rms, res.overlap, res.iterations,
                                   res.condition))
-        reports[-1].reasons = _judge(res, noise_level, min_overlap, min_condition)
+        inl = tight_overlap(scans[i].points, res.transform, tgt, tgt_n, tree, max(noise_level, 1e-300))
+        reports[-1].inliers = inl
+        reports[-1].reasons = _judge(res, inl, noise_level, min_overlap, min_condition)
+        if not reports[-1].reasons:
+            trusted.append(i)
     if refine and len(scans) > 2:
         for i in range(1, len(scans)):
-            others = [j for j in range(len(scans)) if j != i]
+            others = [j for j in trusted if j != i]
+            if not others:
+                continue
             tgt, tgt_n, tgt_w = model(others)
+            tree = cKDTree(tgt)
             res = icp(scans[i].points, tgt, tgt_n, poses[i], source_normals=normals[i], target_weights=tgt_w,
-                      seed=seed)
+                      tree=tree, seed=seed)
             poses[i] = res.transform
             rep = reports[i]
             rep.transform, rep.rms, rep.overlap, rep.condition = res.transform, res.rms, res.overlap, res.condition
             rep.iterations += res.iterations
-            rep.reasons = _judge(res, noise_level, min_overlap, min_condition)
+            rep.inliers = tight_overlap(scans[i].points, res.transform, tgt, tgt_n, tree, max(noise_level, 1e-300))
+            rep.reasons = _judge(res, rep.inliers, noise_level, min_overlap, min_condition)
+            if not rep.reasons and i not in trusted:
+                trusted.append(i)
     for rep in reports[1:]:
         rep.status = rep.reasons[0].split(":")[0].split(" ")[0] if rep.reasons else "ok"
     return reports

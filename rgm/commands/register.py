@@ -79,9 +79,9 @@ def run(args) -> int:
             write_conf(args.poses_out, scans, [r.transform for r in reports])
     except (RgmError, OutputExists, OSError) as exc:
         return _fail(str(exc))
-    print(f"{'view':40s} {'status':14s} {'rms':>10s} {'overlap':>8s} {'iter':>5s}")
+    print(f"{'view':32s} {'status':14s} {'rms':>10s} {'overlap':>8s} {'inliers':>8s} {'iter':>5s}")
     for r in reports:
-        print(f"{Path(r.source).name:40s} {r.status:14s} {r.rms:10.4g} {r.overlap:8.0%} {r.iterations:5d}")
+        print(f"{Path(r.source).name:32s} {r.status:14s} {r.rms:10.4g} {r.overlap:8.0%} {r.inliers:8.0%} {r.iterations:5d}")
     untrusted = [r for r in reports if r.status not in ("ok", "reference")]
     for r in untrusted:
         print(f"rgmc register: warning: {Path(r.source).name}: do not trust this pose: {'; '.join(r.reasons)}",
