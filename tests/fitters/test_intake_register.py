@@ -80,3 +80,27 @@ def test_low_overlap_and_wrong_match_are_flagged():
                              use_poses=True)
     assert reports[1].status != "ok"
     assert any(r.startswith("low_overlap") for r in reports[1].reasons)
+
+
+def test_rgmc_register_command(tmp_path, capsys):
+    import json
+
+    from rgm.cli import main
+    from rgm.fitters.io import read_scan
+
+    out, rep, conf = tmp_path / "merged.ply", tmp_path / "reg.json", tmp_path / "out.conf"
+    code = main(["register", str(BUNNY / "bun.conf"), "-o", str(out), "--report", str(rep), "--poses-out", str(conf)])
+    assert code == 0
+    report = json.loads(rep.read_text())
+    assert [v["status"] for v in report["views"]] == ["reference", "ok", "ok"]
+    truth = read_conf(BUNNY / "bun.conf")
+    merged = read_scan(out)
+    assert merged.n <= sum(v.n for v in truth) and merged.n > 0.9 * sum(v.n for v in truth)  # outliers dropped
+    for view, entry in zip(truth, report["views"]):
+        assert pose_error(np.array(entry["transform"]), view.pose, view.points)[2] < 0.001
+    assert "bun045.ply" in capsys.readouterr().out
+    # refuses to overwrite without --force, with a message and no traceback
+    assert main(["register", str(BUNNY / "bun.conf"), "-o", str(out)]) == 1
+    assert "exists" in capsys.readouterr().err
+    assert main(["register", str(tmp_path / "missing.ply"), str(BUNNY / "bun000.ply"), "-o", str(tmp_path / "x.ply")]) == 1
+    assert "no such file" in capsys.readouterr().err

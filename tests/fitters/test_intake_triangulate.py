@@ -141,3 +141,23 @@ def test_bad_input():
         triangulate(Scan(np.eye(3)), 0.0)
     with pytest.raises(ScanError, match="collinear"):
         triangulate(Scan(np.column_stack([np.arange(5.0), np.zeros(5), np.zeros(5)])), 0.1)
+
+
+def test_rgmc_triangulate_command(tmp_path, capsys):
+    import json
+
+    from rgm.cli import main
+
+    y, x = np.mgrid[0:60, 0:80].astype(float)
+    depth = 5 * np.exp(-((x - 40) ** 2 + (y - 30) ** 2) / 200)
+    depth[:10, :10] = np.nan
+    np.save(tmp_path / "d.npy", depth)
+    out, rep = tmp_path / "m.ply", tmp_path / "t.json"
+    assert main(["triangulate", str(tmp_path / "d.npy"), "--tol", "0.05", "-o", str(out), "--report", str(rep)]) == 0
+    report = json.loads(rep.read_text())
+    assert report["max_error"] <= 0.05 and report["triangles"] > 0
+    mesh = read_scan(out)
+    assert len(mesh.faces) == report["triangles"]
+    assert "triangles" in capsys.readouterr().out
+    assert main(["triangulate", str(tmp_path / "d.npy"), "--tol", "-1", "-o", str(tmp_path / "n.ply")]) == 1
+    assert "--tol must be positive" in capsys.readouterr().err
