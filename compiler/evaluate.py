@@ -287,7 +287,7 @@ class Evaluator:
             return thunk()
         except ZeroDivisionError as exc:
             raise _Failure(error("E0511", str(exc), expr.span, "evaluates to a division by zero")) from None
-        except GeometryError as exc:
+        except (GeometryError, ValueError, np.linalg.LinAlgError) as exc:
             raise _Failure(error("E0510", str(exc), expr.span, "cannot be built")) from None
 
     def call(self, expr: A.Call, scope):
