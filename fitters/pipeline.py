@@ -139,7 +139,8 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
 def fit_scans(paths, *, tol: float, poses=None, statistic: str = "p95", register: bool = False,
               scale: float = 1.0, progress: bool = True, title: str | None = None) -> FitResult:
     """The whole pipeline from scan files.  `scale` converts the scans' units to mm (1000 for metres).
-    Views are taken to be in one frame (their poses from `poses` or a .conf) unless `register`."""
+    Views are taken to be in one frame (their poses from `poses` or a .conf) unless `register`, which
+    runs `rgm.fitters.register.register_views` (from those poses when given) and leaves out failed views."""
     from rgm.fitters.filters import statistical_outliers
     from rgm.fitters.io import ScanError, read_views
 
@@ -148,14 +149,14 @@ def fit_scans(paths, *, tol: float, poses=None, statistic: str = "p95", register
         scans = read_views(paths, poses)
         files = [Path(s.source) for s in scans]
         sources = [(str(f), sha256_of(f)) for f in files if f.exists()]
+    registration = []
     if register:
         with stages("register"):
-            try:
-                from rgm.fitters.register import register_views
-            except ImportError:
-                raise ScanError("registration is not available in this build; pass views already in one "
-                                "frame or their poses with --poses") from None
-            scans = register_views(scans)
+            from rgm.fitters.register import register_views
+
+            reports = register_views(scans, use_poses=poses is not None or len(paths) == 1)
+            registration = [r.to_json() for r in reports]
+            scans = [s.replace(pose=r.transform) for s, r in zip(scans, reports) if r.status in ("reference", "ok")]
     with stages("filter"):
         points = np.vstack([s.world_points() for s in scans]) * scale
         points = points[~statistical_outliers(points)]
@@ -163,5 +164,10 @@ def fit_scans(paths, *, tol: float, poses=None, statistic: str = "p95", register
         raise ScanError(f"{len(points)} points left after filtering: too few to fit a part")
     options = {"tol": f"{tol:g}", "statistic": statistic, "scale": f"{scale:g}", "register": register,
                "poses": str(poses) if poses else "none"}
-    return fit_points(points, tol=tol, statistic=statistic, sources=sources, options=options, stages=stages,
-                      title=title or "part")
+    result = fit_points(points, tol=tol, statistic=statistic, sources=sources, options=options, stages=stages,
+                        title=title or "part")
+    if registration:
+        result.report["registration"] = registration
+        dropped = [r["file"] for r in registration if r["status"] not in ("reference", "ok")]
+        result.report["notes"] += [f"view {f} failed registration and was left out" for f in dropped]
+    return result

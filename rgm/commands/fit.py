@@ -49,15 +49,15 @@ def run(args) -> int:
     out = Path(args.output)
     outputs = [out] + ([Path(args.report)] if args.report else [])
     inputs = {Path(v).resolve() for v in args.views} | ({Path(args.poses).resolve()} if args.poses else set())
+    if not args.tol > 0:
+        return _fail(f"--tol must be a positive length in mm, got {args.tol}")
+    if not args.scale > 0:
+        return _fail(f"--scale must be positive, got {args.scale}")
     for path in outputs:
         if path.resolve() in inputs:
             return _fail(f"{path} is an input; refusing to overwrite it")
         if path.exists() and not args.force:
             return _fail(f"{path} exists; pass --force to overwrite it")
-    if not args.tol > 0:
-        return _fail(f"--tol must be a positive length in mm, got {args.tol}")
-    if not args.scale > 0:
-        return _fail(f"--scale must be positive, got {args.scale}")
     name = args.name or (out.stem if out.stem.isidentifier() else "part")
     try:
         from rgm.fitters.pipeline import fit_scans
