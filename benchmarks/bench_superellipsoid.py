@@ -51,7 +51,7 @@ def errors(fit, truth, rng):
 def recovery(cases: int, n: int):
     print(f"superellipsoid recovery: {cases} random shapes x {n} points, 1 % noise "
           f"(load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores: times scale with it)")
-    print(f"{'data':<16}{'method':<8}{'time ms (median)':>18}{'surface % (med/max)':>22}"
+    print(f"{'data':<16}{'method':<8}{'wall / cpu ms (med)':>20}{'surface % (med/max)':>22}"
           f"{'size % (med/max)':>19}{'eps (med/max)':>16}")
     for label, outliers in (("clean", 0.0), ("5 % outliers", 0.05)):
         rows = {"rgm": [], "plain": []}
@@ -61,17 +61,17 @@ def recovery(cases: int, n: int):
                                    rng.uniform(-500, 500, 3), 0.0, 0.0)
             points, _ = superellipsoid_cloud(truth, n, noise=0.01, outliers=outliers, rng=rng)
             for name, fitter in (("rgm", fit_superellipsoid), ("plain", fit_superellipsoid_plain)):
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 fit = fitter(points)
-                dt = time.perf_counter() - t0
-                rows[name].append((dt, *errors(fit, truth, np.random.default_rng(seed + 10_000))))
+                dt, dc = time.perf_counter() - t0, time.process_time() - c0
+                rows[name].append((dt, *errors(fit, truth, np.random.default_rng(seed + 10_000)), dc))
         for name, r in rows.items():
             r = np.array(r)
-            print(f"{label:<16}{name:<8}{1e3 * np.median(r[:, 0]):>18.1f}"
+            print(f"{label:<16}{name:<8}{1e3 * np.median(r[:, 0]):>11.1f} /{1e3 * np.median(r[:, 4]):>6.1f}"
                   f"{100 * np.median(r[:, 1]):>11.2f} /{100 * np.max(r[:, 1]):>7.2f}"
                   f"{100 * np.median(r[:, 2]):>10.2f} /{100 * np.max(r[:, 2]):>6.1f}"
                   + (f"{np.nanmedian(r[:, 3]):>9.3f} /{np.nanmax(r[:, 3]):>5.2f}" if np.isfinite(r[:, 3]).any()
-                     else f"{'n/a (other axis)':>16}"))
+                     else f"{'n/a (other axis)':>17}"))
         ratio = np.median(np.array(rows["plain"])[:, 1]) / np.median(np.array(rows["rgm"])[:, 1])
         print(f"{'':<16}plain / rgm median surface error: {ratio:.1f}x")
 
