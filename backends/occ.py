@@ -213,7 +213,7 @@ def _geom2d_pieces(curve):
     from OCP.Geom2d import Geom2d_Circle
     from OCP.gp import gp_Ax22d, gp_Dir2d, gp_Pnt2d
 
-    from rgm.model import Circle, CircularArc, CompositeCurve, Line, Polyline
+    from rgm.model import BSplineCurve, Circle, CircularArc, CompositeCurve, Line, Polyline
 
     def segment(a, b):
         c = GCE2d_MakeSegment(gp_Pnt2d(*map(float, a)), gp_Pnt2d(*map(float, b))).Value()
@@ -238,10 +238,13 @@ def _geom2d_pieces(curve):
 
 def _pcurve_pieces(loop, surface, tol):
     """Pcurves (Geom2d_Curve, t0, t1) of a loop in `surface`'s (u, v), joined end to start."""
+    from OCP.BRep import BRep_Tool
     from OCP.Geom2d import Geom2d_TrimmedCurve
     from OCP.GeomProjLib import GeomProjLib
+    from OCP.TopExp import TopExp
 
-    from rgm.model import IntersectionCurve
+    from rgm.geometry import NurbsCurve
+    from rgm.model import BSplineCurve, IntersectionCurve, Plane
 
     pieces = []  # (geom2d or None, t0, t1, intersection piece or None)
     for piece in loop.pieces:
@@ -249,10 +252,17 @@ def _pcurve_pieces(loop, surface, tol):
             pieces.append((None, 0.0, 0.0, piece))
         elif piece.dim == 2:
             pieces += [(c, t0, t1, None) for c, t0, t1 in _geom2d_pieces(piece)]
-        else:
-            c3 = geom_curve(piece.nurbs())
-            c2 = GeomProjLib.Curve2d_s(c3, c3.FirstParameter(), c3.LastParameter(), surface_geom(surface), tol)
-            pieces.append((c2, c2.FirstParameter(), c2.LastParameter(), None))
+        elif isinstance(surface, Plane):  # plane coordinates are an exact affine image of the curve
+            c = piece.nurbs()
+            image = NurbsCurve(c.degree, c.knots, surface.coordinates(np.asarray(c.ctrl)),
+                               c.weights if c.is_rational else None)
+            pieces += [(g, t0, t1, None) for g, t0, t1 in _geom2d_pieces(BSplineCurve(image))]
+        else:  # each smooth 3-D edge (line, arc, spline) projected onto the surface
+            for edge in _edges_of(piece, tol):
+                c3, t0, t1 = BRep_Tool.Curve_s(edge, 0.0, 1.0), BRep_Tool.Parameter_s(
+                    TopExp.FirstVertex_s(edge), edge), BRep_Tool.Parameter_s(TopExp.LastVertex_s(edge), edge)
+                c2 = GeomProjLib.Curve2d_s(c3, t0, t1, surface_geom(surface), tol)
+                pieces.append((c2, c2.FirstParameter(), c2.LastParameter(), None))
     out = []
     for k, (c, t0, t1, inter) in enumerate(pieces):
         if inter is None:
@@ -573,11 +583,15 @@ def read_iges(path):
         fails.append(f"ReadFile status {int(status)}")
     check = reader.Model().GlobalCheck() if reader.Model() is not None else None
     if check is not None:
-        fails += [check.CFail(i).ToCString() for i in range(1, check.NbFails() + 1)]
+        fails += [_text(check.CFail(i)) for i in range(1, check.NbFails() + 1)]
     if status != IFSelect_RetDone:
         return None, fails
     reader.TransferRoots()
     return reader.OneShape(), fails
+
+
+def _text(message) -> str:
+    return message if isinstance(message, str) else message.ToCString()
 
 
 def faces_of(shape) -> list:
