@@ -151,14 +151,12 @@ def _surface_speed(fit: SurfaceFit) -> float:
 
 
 def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statistic: str = "p95",
-                 max_ctrl: int = 40000, cuts: bool = True, params=None,
-                 bins: int | None = None) -> FreeformShape:
+                 max_ctrl: int = 40000, cuts: bool = True, params=None) -> FreeformShape:
     """Fit a trimmed NURBS surface to a part's points (n, 3), or to a range grid (rows, cols, 3) with
     its valid mask. `tol` (model units) bounds `statistic` of the residuals. With `cuts`, straight
     planar boundary pieces become described plane intersections. `params` (u, v), each (n,) in [0, 1],
     are scattered points' own parameters (a projection onto a base surface, `rgm.fitters.patches`);
-    without them the points are projected onto their best-fit plane. `bins`: the side of the occupancy
-    raster of scattered parameters whose boundary becomes the trim (default from the point count)."""
+    without them the points are projected onto their best-fit plane."""
     if grid is not None:
         mask = np.isfinite(grid).all(axis=2) if mask is None else mask
         ug, vg = grid_parameters(np.where(mask[..., None], grid, 0.0), mask)
@@ -168,7 +166,7 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
     else:
         u, v = plane_parameters(points)[:2] if params is None else map(np.asarray, params)
         fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl)
-        bins = bins or int(np.clip(np.sqrt(len(points)) / 2, 24, 256))
+        bins = int(np.clip(np.sqrt(len(points)) / 2, 24, 256))
         region = _occupancy(u, v, bins)
         rows = cols = (np.arange(bins) + 0.5) / bins
         snap = np.c_[u, v]

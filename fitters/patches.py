@@ -7,20 +7,25 @@ merged views of a closed or wrapped part:
 1. Creases. Robust PCA normals (`rgm.fitters.normals.pca_normals`, Hoppe et al. 1992); a point is a
    crease point when at least two of its k nearest neighbours have normals more than `angle_deg` away
    from its own (unoriented normals: |n_i . n_j| is compared). Crease points are set aside, the rest
-   joined by a radius graph (cKDTree pairs within a few point spacings) into connected components
+   joined by a k-nearest graph (8 neighbours within a few point spacings, normals agreeing) into components
    (`scipy.sparse.csgraph.connected_components`); small components are dropped and each crease point then
-   joins the patch of its nearest kept point, so neighbouring patches meet at the crease itself.
+   joins the patch on whose local tangent plane it lies, so neighbouring patches meet at the crease
+   itself and no point of one face is pulled into its neighbour.
 2. Parameterisation by projection onto a base surface: the best-fit plane when the patch is disc-like
    (every normal within `max_angle` of the plane normal: the projection is then one-to-one), otherwise a
    cylinder whose axis is the direction most nearly perpendicular to all normals (the smallest
    eigenvector of sum n n^T) through the least-squares meeting point of the normal lines; u is the angle
    about the axis cut at the largest angular gap, v the height. A patch that wraps fully round (no gap)
-   is split into two halves; a patch that fits neither base is split in two across its longest extent.
-   Both parameters are scaled to [0, 1]².
+   is split into two halves; a patch that fits neither base (a crease too soft to be found, such as a
+   rounded bottom edge) is split into its mantle and its ends (normals across or along the cylinder
+   axis), or failing that across its longest extent. Both parameters are scaled to [0, 1]².
 3. Each patch is fitted by `fit_freeform` with those parameters (least squares, knot insertion to the
    tolerance, trimming loops from the occupied cells of (u, v)).
 4. The G0 gap between neighbouring patches is measured, not assumed: points sampled along one patch's
    trimming loop near the other patch are projected onto the other patch's surface (closest points).
+   Each patch has its own trim from its own data, so the gap is of the order of the trimming loop's
+   distance from the data edge (a few point spacings): reported, not closed. Sharing one boundary curve
+   (the neighbours' intersection) between patches is not done here.
 """
 from __future__ import annotations
 
@@ -37,8 +42,8 @@ from rgm.fitters.freeform import design_matrix
 from rgm.fitters.freeform_part import FreeformShape, emit_freeform, fit_freeform
 from rgm.fitters.normals import pca_normals
 
-__all__ = ["crease_mask", "split_scattered", "base_parameters", "PatchFit", "PatchSet", "fit_patches",
-           "g0_gaps", "patches_rgm", "write_patches"]
+__all__ = ["crease_mask", "split_scattered", "base_parameters", "Base", "PatchFit", "Gap", "PatchSet",
+           "fit_patches", "boundary_samples", "g0_gaps", "patches_rgm", "write_patches"]
 
 
 def _points(points) -> np.ndarray:
@@ -71,15 +76,15 @@ def _components(points, normals, radius: float, angle_deg: float) -> np.ndarray:
 
 def crease_mask(points, normals=None, *, angle_deg: float = 35.0, k: int = 16, tree=None) -> np.ndarray:
     """(n,) bool: points whose neighbourhood (2k nearest) holds at least two unit normals more than
-    `angle_deg` away from the point's own, or whose k nearest are mostly such points. Normals (n, 3) may be unoriented; by default robust PCA
-    normals of the points."""
+    `angle_deg` away from the point's own, or whose k nearest are mostly such points (no stray smooth
+    point inside a band). Normals (n, 3) may be unoriented; by default robust PCA normals."""
     points = _points(points)
     tree = tree or cKDTree(points)
     normals = pca_normals(points, k, tree=tree)[0] if normals is None else np.asarray(normals, float)
     _, idx = tree.query(points, k=int(min(2 * k, len(points))), workers=-1)
     cos = np.abs(np.einsum("nkd,nd->nk", normals[idx], normals))
     crease = np.sort(cos, axis=1)[:, 1] < np.cos(np.radians(angle_deg))
-    return crease | (crease[idx[:, :k]].mean(axis=1) >= 0.5)   # no stray smooth points inside a band
+    return crease | (crease[idx[:, :k]].mean(axis=1) >= 0.5)
 
 
 def split_scattered(points, normals=None, *, angle_deg: float = 35.0, k: int = 16, radius: float | None = None,
@@ -88,8 +93,9 @@ def split_scattered(points, normals=None, *, angle_deg: float = 35.0, k: int = 1
 
     The graph links each smooth point to its 8 nearest smooth points within `radius` (default 5 x the
     median point spacing) whose normals agree within `angle_deg`: a k-nearest graph follows the sampling
-    density, which varies between overlapping and single views. Components smaller
-    than `min_points` (default 0.25 % of the points, at least 30) are dropped with their crease band."""
+    density, which varies between overlapping and single views. Components smaller than `min_points`
+    (default 0.25 % of the points, at least 30) are dropped; crease points then join the patch on whose
+    tangent plane they lie, and those with no patch near stay out."""
     points = _points(points)
     tree = cKDTree(points)
     radius = radius or 5 * _spacing(tree)

@@ -12,7 +12,7 @@ from scipy.spatial import cKDTree
 
 import rgm
 from rgm.errors import GeometryError
-from rgm.fitters.patches import base_parameters, fit_patches, patches_rgm, split_scattered, write_patches
+from rgm.fitters.patches import base_parameters, fit_patches, split_scattered, write_patches
 from rgm.fitters.normals import pca_normals
 from rgm.model import TrimmedFace
 
