@@ -106,11 +106,11 @@ class IgesData:
             if "D" in text or "d" in text:
                 text = text.replace("D", "E").replace("d", "e")
             try:
-                return np.array(_orjson.loads("[" + text + "]"), dtype=np.float64)
+                return _finite(np.array(_orjson.loads("[" + text + "]"), dtype=np.float64), self.entries[de])
             except (ValueError, TypeError):
                 pass  # not JSON-shaped numbers (".5", "+1.", ...): the general path below
         try:
-            return np.fromiter(map(float, chunk), dtype=np.float64, count=count)
+            return _finite(np.fromiter(map(float, chunk), dtype=np.float64, count=count), self.entries[de])
         except ValueError:
             try:
                 return np.array([_to_real(t) for t in chunk], dtype=np.float64)
@@ -120,6 +120,12 @@ class IgesData:
     def string(self, de: int, index: int) -> str:
         toks = self.params[de]
         return str(toks[index]) if index < len(toks) else ""
+
+
+def _finite(values: np.ndarray, entry) -> np.ndarray:
+    if not np.all(np.isfinite(values)):
+        raise IgesFormatError(f"{entry.where()}: a parameter is not a finite number")
+    return values
 
 
 def _to_int(tok: str) -> int:

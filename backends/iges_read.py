@@ -36,6 +36,11 @@ _NOT_OBJECTS = {0, 124, 314, 406}
 _TO_MM = {"ft": 304.8, "mi": 1609344.0, "km": 1e6, "mil": 0.0254, "um": 1e-3, "uin": 2.54e-5}
 
 
+#: what inconsistent entity data can raise while model objects are built from it
+_DATA_ERRORS = (RgmError, ValueError, IndexError, ZeroDivisionError, FloatingPointError, np.linalg.LinAlgError,
+                RecursionError)
+
+
 class _Skip(Exception):
     """An entity that cannot become a model object (unsupported or invalid); already reported."""
 
@@ -166,8 +171,8 @@ class _Reader:
         except _Skip:
             self.memo[key] = None
             raise
-        except (GeometryError, IgesFormatError, ValueError, IndexError) as exc:
-            self.problems[de] = f"{e.where()}: {exc}"
+        except _DATA_ERRORS as exc:
+            self.problems[de] = f"{e.where()}: {exc or type(exc).__name__}"
             self.memo[key] = None
             raise _Skip from None
         self.memo[key] = obj
@@ -461,9 +466,12 @@ def _loop_gap(objects) -> float:
                         continue
                     pieces = piece.pieces if isinstance(piece, CompositeCurve) else (piece,)
                     for p in pieces:
-                        c = p.nurbs()
-                        pts = c.evaluate(np.linspace(*c.domain, 65))
-                        gap = max(gap, float(face.surface.nurbs().closest_point(pts)[3].max()))
+                        try:
+                            c = p.nurbs()
+                            pts = c.evaluate(np.linspace(*c.domain, 65))
+                            gap = max(gap, float(face.surface.nurbs().closest_point(pts)[3].max()))
+                        except _DATA_ERRORS:  # a degenerate piece: the compiler's checks will name it
+                            continue
     return gap
 
 
