@@ -1,0 +1,147 @@
+"""Model objects lowered to OpenCASCADE topology: analytic revolutions, B-spline faces, pcurve-trimmed
+faces, sewn shells and solids, all valid by BRepCheck_Analyzer; CadQuery objects users can keep editing."""
+import numpy as np
+import pytest
+
+pytest.importorskip("OCP")
+pytestmark = pytest.mark.occ
+
+from rgm.backends import occ  # noqa: E402
+from rgm.errors import BackendError  # noqa: E402
+from rgm.geometry import NurbsCurve, NurbsSurface  # noqa: E402
+from rgm.model import (  # noqa: E402
+    BSplineCurve, BSplineSurface, Circle, CircularArc, Line, Loop, Model, Plane, Polyline, Revolution, Shell,
+    TrimmedFace,
+)
+
+
+def volume(shape):
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    props = GProp_GProps()
+    BRepGProp.VolumeProperties_s(shape, props)
+    return props.Mass()
+
+
+def types(shape):
+    return [occ.surface_type(f) for f in occ.faces_of(shape)]
+
+
+Y = ([0, 0, 0], [0, 1, 0])
+
+
+@pytest.mark.parametrize("profile, expected", [
+    (Line([10, 0, 0], [10, 50, 0]), ["Cylinder"]),
+    (Line([10, 0, 0], [5, 50, 0]), ["Cone"]),
+    (Line([2, 0, 0], [10, 0, 0]), ["Plane"]),
+    (CircularArc([0, 0, 0], [0, 0, 1], 10, [0, -10, 0], [0, 10, 0]), ["Sphere"]),
+    (BSplineCurve(NurbsCurve(2, [0, 0, 0, 1, 1, 1], [[5, 0, 0], [9, 5, 0], [6, 10, 0]])), ["SurfaceOfRevolution"]),
+])
+def test_revolution_keeps_analytic_kinds(profile, expected):
+    shape = occ.to_shape(Revolution(profile, *Y))
+    assert types(shape) == expected
+    assert occ.is_valid(shape)
+
+
+def test_pin_is_a_solid_with_exact_volume():
+    pts = np.array([[0, 0, 0], [25.95, 0, 0], [27.15, 1.2, 0], [27.15, 128.68, 0], [25.95, 129.88, 0], [0, 129.88, 0]])
+    shape = occ.to_shape(Revolution(Polyline(pts), *Y, name="pin"))
+    assert shape.ShapeType().name == "TopAbs_SOLID"
+    assert types(shape) == ["Plane", "Cone", "Cylinder", "Cone", "Plane"]
+    x0, x1, dy = pts[:-1, 0], pts[1:, 0], np.diff(pts[:, 1])
+    exact = abs(np.sum(np.pi * dy * (x0 * x0 + x0 * x1 + x1 * x1) / 3))
+    assert volume(shape) == pytest.approx(exact, rel=1e-9)
+
+
+def test_partial_revolution_has_its_angle_range():
+    rev = Revolution(Line([10, 0, 0], [10, 20, 0]), *Y, start=np.pi / 4, end=np.pi)
+    face = occ.faces_of(occ.to_shape(rev))[0]
+    from OCP.BRepTools import BRepTools
+
+    u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
+    assert u1 - u0 == pytest.approx(3 * np.pi / 4)
+
+
+def bicubic(seed=0, n=5, rational=False):
+    rng = np.random.default_rng(seed)
+    k = np.concatenate([np.zeros(4), np.sort(rng.uniform(0.2, 0.8, n - 4)), np.ones(4)])
+    g = np.linspace(0, 10, n)
+    ctrl = np.stack(list(np.meshgrid(g, g, indexing="ij")) + [rng.uniform(-2, 2, (n, n))], axis=-1)
+    return NurbsSurface(3, 3, k, k, ctrl, rng.uniform(0.5, 2, (n, n)) if rational else None)
+
+
+def test_bspline_face_has_the_same_poles_and_points():
+    nurbs = bicubic(1, rational=True)
+    face = occ.faces_of(occ.to_shape(BSplineSurface(nurbs)))[0]
+    from OCP.BRep import BRep_Tool
+
+    surf = BRep_Tool.Surface_s(face)
+    u, v = np.random.default_rng(2).uniform(0, 1, (2, 50))
+    ours = nurbs.evaluate(u, v)
+    theirs = np.array([[surf.Value(a, b).X(), surf.Value(a, b).Y(), surf.Value(a, b).Z()] for a, b in zip(u, v)])
+    assert np.abs(ours - theirs).max() < 1e-12
+
+
+def test_trimmed_face_with_hole_and_3d_edges():
+    nurbs = bicubic(3)
+    outer = Loop((Polyline([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9], [0.1, 0.1]]),))
+    hole = Loop((Circle([0.5, 0.5], [0, 0, -1], 0.2),))
+    shape = occ.to_shape(TrimmedFace(BSplineSurface(nurbs), outer, (hole,)))
+    assert occ.is_valid(shape)
+    assert len(occ._wires_of(shape)) == 2
+    # every edge has a 3-D curve (built from its pcurve) and a pcurve on the face
+    from OCP.BRep import BRep_Tool
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    face = occ.faces_of(shape)[0]
+    exp = TopExp_Explorer(shape, TopAbs_EDGE)
+    while exp.More():
+        edge = TopoDS.Edge_s(exp.Current())
+        assert BRep_Tool.Curve_s(edge, 0.0, 1.0) is not None
+        assert BRep_Tool.CurveOnSurface_s(edge, face, 0.0, 1.0) is not None
+        exp.Next()
+
+
+def test_trimmed_plane_and_intersection_trim():
+    plane = Plane([0, 0, 0], [0, 0, 1], [1, 0, 0])
+    square = TrimmedFace(plane, Loop((Polyline([[0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0], [0, 0, 0]]),)))
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+
+    props = GProp_GProps()
+    BRepGProp.SurfaceProperties_s(occ.to_shape(square), props)
+    assert props.Mass() == pytest.approx(12.0, rel=1e-12)
+
+
+def test_shell_of_six_patches_is_sewn_into_a_unit_cube():
+    c = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    quads = [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)]
+    k = [0, 0, 1, 1]
+    faces = [BSplineSurface(NurbsSurface(1, 1, k, k, np.array([[c[a], c[b]], [c[d], c[e]]]))) for a, b, e, d in quads]
+    solid = occ.to_shape(Shell(faces))
+    assert solid.ShapeType().name == "TopAbs_SOLID"
+    assert volume(solid) == pytest.approx(1.0, rel=1e-9)
+
+
+def test_to_cadquery_objects_can_be_filleted_and_cut():
+    import cadquery as cq
+
+    pin = Revolution(Polyline([[0, 0, 0], [10, 0, 0], [10, 40, 0], [0, 40, 0]]), *Y, name="pin")
+    model = Model("mm", 0.01, {"pin": pin}, ("pin",))
+    solid = occ.to_shape(pin)
+    obj = occ.to_cadquery(model)
+    assert isinstance(obj, cq.Shape) and obj.isValid()
+    rounded = obj.fillet(1.0, obj.Edges())
+    assert rounded.isValid() and rounded.Volume() < obj.Volume()
+    cut = obj.cut(cq.Solid.makeBox(5, 5, 5, cq.Vector(-2.5, 10, 8)))
+    assert cut.isValid() and cut.Volume() < volume(solid)
+
+
+def test_unlowerable_objects_are_clear_errors():
+    with pytest.raises(BackendError, match="infinite plane"):
+        occ.to_shape(Plane([0, 0, 0], [0, 0, 1]))
+    with pytest.raises(BackendError, match="parameter-space"):
+        occ.to_shape(Line([0, 0], [1, 1]))

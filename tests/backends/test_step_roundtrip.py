@@ -1,0 +1,173 @@
+"""STEP files written by rgm, read back by OpenCASCADE's STEPControl_Reader: same faces and surface
+types, BRepCheck_Analyzer valid, every face's points within 1e-7 x size of rgm's own evaluation; the
+schema, units and binding names are in the file; --verify refuses a bad file and keeps nothing."""
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+pytest.importorskip("OCP")
+pytestmark = pytest.mark.occ
+
+from rgm.backends import occ  # noqa: E402
+from rgm.backends.mesh import face_samples  # noqa: E402
+from rgm.errors import BackendError  # noqa: E402
+from rgm.geometry import NurbsSurface  # noqa: E402
+from rgm.model import BSplineSurface, Circle, Loop, Model, Polyline, Revolution, TrimmedFace  # noqa: E402
+
+PIN = np.array([[0, 0, 0], [25.95, 0, 0], [27.15, 1.2, 0], [27.15, 128.68, 0], [25.95, 129.88, 0], [0, 129.88, 0]])
+
+
+def pin_model(units="mm"):
+    return Model(units, 0.01, {"pin": Revolution(Polyline(PIN), [0, 0, 0], [0, 1, 0], name="pin")}, ("pin",))
+
+
+def surface(seed, n=6, rational=True):
+    rng = np.random.default_rng(seed)
+    k = np.concatenate([np.zeros(4), np.sort(rng.uniform(0.1, 0.9, n - 4)), np.ones(4)])
+    g = np.linspace(0, 50, n)
+    ctrl = np.stack(list(np.meshgrid(g, g, indexing="ij")) + [rng.uniform(-10, 10, (n, n))], axis=-1)
+    return NurbsSurface(3, 3, k, k, ctrl, rng.uniform(0.5, 2.0, (n, n)) if rational else None)
+
+
+def check_roundtrip(model, path, **kw):
+    """Write, read back, compare with the shapes rgm lowered and with rgm's own evaluation."""
+    occ.write_step(model, path, verify=True, **kw)
+    back = occ.read_step(path)
+    assert occ.is_valid(back)
+    ours = [f for _, s in occ.named_shapes(model) for f in occ.faces_of(s)]
+    theirs = occ.faces_of(back)
+    assert [occ.surface_type(f) for f in theirs] == [occ.surface_type(f) for f in ours]
+    pts, size = face_samples(model.exported(), 25)
+    assert occ.distances_to_shape(pts, back).max() <= 1e-7 * size
+    # and the other way: points of every read-back face lie on rgm's faces (their own tessellation)
+    from OCP.BRepMesh import BRepMesh_IncrementalMesh
+    from OCP.BRep import BRep_Tool
+    from OCP.TopLoc import TopLoc_Location
+
+    BRepMesh_IncrementalMesh(back, size / 20)
+    ours_shape = occ.to_shape(model.exported()[0])
+    for face in theirs:
+        tri = BRep_Tool.Triangulation_s(face, TopLoc_Location())
+        pick = np.unique(np.linspace(1, tri.NbNodes(), 25).astype(int))
+        nodes = np.array([[tri.Node(int(i)).X(), tri.Node(int(i)).Y(), tri.Node(int(i)).Z()] for i in pick])
+        assert occ.distances_to_shape(nodes, ours_shape).max() <= 1e-7 * size
+    return path.read_text()
+
+
+def test_pin_roundtrip_names_units_schema(tmp_path):
+    text = check_roundtrip(pin_model(), tmp_path / "pin.step")
+    assert "AUTOMOTIVE_DESIGN" in text                 # AP214
+    assert "PRODUCT('pin'" in text
+    assert "SI_UNIT(.MILLI.,.METRE.)" in text
+
+
+@pytest.mark.parametrize("schema, marker", [("AP203", "CONFIG_CONTROL_DESIGN"), ("AP242", "AP242")])
+def test_other_schemas(tmp_path, schema, marker):
+    text = check_roundtrip(pin_model(), tmp_path / f"pin_{schema}.step", schema=schema)
+    assert marker in text
+
+
+def test_inch_model_is_written_in_inches(tmp_path):
+    text = check_roundtrip(pin_model("in"), tmp_path / "pin_in.step")
+    assert "'INCH'" in text
+
+
+@settings(max_examples=25, deadline=None, database=None)
+@given(seed=st.integers(0, 10_000), trimmed=st.booleans())
+def test_random_surfaces_and_trims_roundtrip(tmp_path_factory, seed, trimmed):
+    obj = BSplineSurface(surface(seed, rational=seed % 2 == 0), name="skin")
+    if trimmed:
+        rng = np.random.default_rng(seed)
+        a, b = rng.uniform(0.05, 0.2, 2), rng.uniform(0.8, 0.95, 2)
+        outer = Loop((Polyline([a, [b[0], a[1]], b, [a[0], b[1]], a]),))
+        hole = Loop((Circle([0.5, 0.5], [0, 0, -1], rng.uniform(0.05, 0.2)),))
+        obj = TrimmedFace(obj, outer, (hole,), name="skin")
+    model = Model("mm", 0.01, {"skin": obj}, ("skin",))
+    check_roundtrip(model, tmp_path_factory.mktemp("step") / "skin.step")
+
+
+def test_intersection_trimmed_example(tmp_path):
+    rgm = pytest.importorskip("rgm")
+    try:
+        model = rgm.load("examples/hand.rgm")
+    except Exception as exc:  # the evaluator is someone else's work in progress
+        pytest.skip(f"examples/hand.rgm does not load yet: {exc}")
+    occ.write_step(model, tmp_path / "hand.step", verify=True)
+    back = occ.read_step(tmp_path / "hand.step")
+    assert occ.is_valid(back) and len(occ.faces_of(back)) == 1
+
+
+def test_verify_refuses_a_wrong_file_and_keeps_nothing(tmp_path, monkeypatch):
+    """An exporter bug (the shape moved by 1 um) is caught by --verify; no output file is left."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_Transform
+    from OCP.gp import gp_Trsf, gp_Vec
+
+    real = occ._write_step_file
+
+    def shifted(pairs, path, schema, units):
+        move = gp_Trsf()
+        move.SetTranslation(gp_Vec(0, 0, 1e-3))
+        real([(n, BRepBuilderAPI_Transform(s, move, True).Shape()) for n, s in pairs], path, schema, units)
+
+    monkeypatch.setattr(occ, "_write_step_file", shifted)
+    with pytest.raises(BackendError, match="deviates"):
+        occ.write_step(pin_model(), tmp_path / "pin.step", verify=True)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_fitted_surface_file_is_compact_and_tolerances_are_not_bloated(tmp_path):
+    """A 30 x 30 fitted-style net: the file stays within ~250 bytes per control point, edge and vertex
+    tolerances stay at the written precision, and each edge carries one pcurve per face."""
+    from OCP.BRep import BRep_Tool
+    from OCP.ShapeAnalysis import ShapeAnalysis_Edge
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_VERTEX
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    n = 30   # fitted surfaces are smooth: a least-squares-like net over a gentle bump
+    k = np.concatenate([np.zeros(4), np.linspace(0, 1, n - 2)[1:-1], np.ones(4)])
+    g = np.linspace(0, 100, n)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    nurbs = NurbsSurface(3, 3, k, k, np.stack([x, y, 5 * np.sin(x / 15) * np.cos(y / 20)], axis=-1))
+    model = Model("mm", 0.01, {"fit": BSplineSurface(nurbs, name="fit")}, ("fit",))
+    path = tmp_path / "fit.step"
+    check_roundtrip(model, path)
+    assert path.stat().st_size < 250 * 30 * 30
+    back = occ.read_step(path)
+    face = occ.faces_of(back)[0]
+    for kind, tolerance in ((TopAbs_EDGE, lambda s: BRep_Tool.Tolerance_s(TopoDS.Edge_s(s))),
+                            (TopAbs_VERTEX, lambda s: BRep_Tool.Tolerance_s(TopoDS.Vertex_s(s)))):
+        exp = TopExp_Explorer(back, kind)
+        while exp.More():
+            assert tolerance(exp.Current()) <= 1e3 * occ.PRECISION
+            if kind == TopAbs_EDGE:
+                assert ShapeAnalysis_Edge().HasPCurve(TopoDS.Edge_s(exp.Current()), face)
+            exp.Next()
+
+
+def test_brep_and_iges_helpers(tmp_path):
+    from OCP.BRep import BRep_Builder
+    from OCP.BRepTools import BRepTools
+    from OCP.IGESControl import IGESControl_Writer
+    from OCP.TopoDS import TopoDS_Shape
+
+    model = pin_model()
+    occ.write_brep(model, tmp_path / "pin.brep")
+    shape = TopoDS_Shape()
+    assert BRepTools.Read_s(shape, str(tmp_path / "pin.brep"), BRep_Builder())
+    assert len(occ.faces_of(shape)) == 5 and occ.is_valid(shape)
+    writer = IGESControl_Writer("MM", 0)
+    writer.AddShape(occ.to_shape(model["pin"]))
+    writer.ComputeModel()
+    writer.Write(str(tmp_path / "pin.igs"))
+    shape, fails = occ.read_iges(tmp_path / "pin.igs")
+    assert fails == [] and len(occ.faces_of(shape)) == 5
+    (tmp_path / "bad.igs").write_text("not an iges file\n")
+    shape, fails = occ.read_iges(tmp_path / "bad.igs")
+    assert shape is None and fails
+
+
+def test_bad_options_are_clear_errors(tmp_path):
+    with pytest.raises(BackendError, match="schema"):
+        occ.write_step(pin_model(), tmp_path / "x.step", schema="AP999")
+    assert not (tmp_path / "x.step").exists()
