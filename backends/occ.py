@@ -587,6 +587,8 @@ def read_iges(path):
     if status != IFSelect_RetDone:
         return None, fails
     reader.TransferRoots()
+    if reader.NbShapes() == 0 or reader.OneShape().IsNull():   # OpenCASCADE reads any text as 0 entities
+        return None, fails + [f"no entity of {path} could be transferred (is it an IGES file?)"]
     return reader.OneShape(), fails
 
 

@@ -94,9 +94,6 @@ def segment_distance(pts, poly):
     return np.linalg.norm(pts[:, None] - (a + t[..., None] * ab), axis=-1).min(axis=1)
 
 
-@pytest.mark.xfail(raises=BackendError, strict=False,
-                   reason="known limitation: refinement can stall on a sliver along a trimming loop (the Delaunay "
-                          "step is unconstrained); every mesh that IS produced is checked below")
 @settings(max_examples=25, deadline=None, database=None)
 @given(seed=st.integers(0, 10_000), tol=st.sampled_from([0.2, 0.1]))
 def test_random_trimmed_face_within_tolerance_and_trim(seed, tol):
@@ -178,7 +175,6 @@ def test_pin_watertight_and_volume(tol):
     assert len(triangles) <= 10 * n_min
 
 
-@pytest.mark.xfail(run=False, reason="known bug: angle-driven refinement does not terminate here yet")
 def test_angle_tolerance_refines_normals():
     nurbs = random_surface(3, bump=3.0)
     v, t = tessellate(BSplineSurface(nurbs), 1.0, angle_tol=np.radians(5))

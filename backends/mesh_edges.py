@@ -1,0 +1,181 @@
+"""Boundary pieces of faces and the edges they form: grouping of coincident pieces, sampling to a
+chordal tolerance, and the vertices every face on an edge shares.
+
+A piece is a face's boundary curve in the face's (u, v), uv(s) for s in [0, 1]. Pieces whose 3-D images
+coincide (the shared edge of two faces of a shell, the seam of a closed surface) form one group; the
+group is sampled once, on its representative piece, so that every face using the edge gets the same
+vertices and closed solids come out watertight. Degenerate pieces (poles) are one vertex.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rgm.errors import BackendError
+
+from .mesh_surface import Patch
+
+#: sampled chords must be within CERTIFY * tol: the margin covers the maximum falling between samples
+CERTIFY = 0.98
+
+
+@dataclass
+class Piece:
+    """One boundary piece of a face: uv(s) for s in [0, 1] on `patch`, with derivative breaks."""
+
+    patch: Patch
+    uv: object
+    breaks: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0]))
+
+    def xyz(self, s) -> np.ndarray:
+        uv = self.uv(np.clip(np.asarray(s, float), 0.0, 1.0))
+        return self.patch.evaluate(uv[:, 0], uv[:, 1])
+
+def _sample_piece(piece, tol, s=None):
+    """Parameters s (k,) in [0, 1] such that every chord of the piece's 3-D image is within `tol` of it
+    (point-to-segment distance at 3 inner points per chord). Each knot span starts with equal steps
+    sized from its largest sagitta over 16 probe steps (the sagitta scales as the square of the step);
+    a chord still failing by d is cut into ceil(sqrt(d / tol)) equal parts."""
+    if s is None:  # per span: equal steps from the largest sagitta over 16 probe steps
+        b = piece.breaks
+        t = b[:-1, None] + np.diff(b)[:, None] * np.linspace(0, 1, 33)[None, :]
+        pts = piece.xyz(t.ravel()).reshape(len(b) - 1, 33, 3)
+        d = segment_distance(pts[:, 1::2], pts[:, 0:-1:2], pts[:, 2::2]).max(axis=1)
+        n = np.maximum(1, np.ceil(16 * np.sqrt(d / (CERTIFY * tol)))).astype(int)
+        s = np.unique(np.concatenate([np.linspace(a, c, k + 1) for a, c, k in zip(b[:-1], b[1:], n)]))
+    for _ in range(40):
+        p = piece.xyz(s)
+        a, h = s[:-1], np.diff(s)
+        fr = np.array([0.25, 0.5, 0.75])
+        q = piece.xyz((a[:, None] + h[:, None] * fr).ravel()).reshape(len(a), 3, 3)
+        dev = segment_distance(q, p[:-1, None], p[1:, None]).max(axis=1)
+        bad = dev > CERTIFY * tol
+        if not bad.any():
+            return s
+        k = np.clip(np.ceil(np.sqrt(dev[bad] / (CERTIFY * tol))), 2, 64).astype(int)
+        new = [a0 + h0 * np.arange(1, ki) / ki for a0, h0, ki in zip(a[bad], h[bad], k)]
+        s = np.unique(np.concatenate([s] + new))
+    raise BackendError("a boundary curve could not be sampled to the tolerance")
+
+
+def segment_distance(q, a, b):
+    """Distances of points q (..., 3) to segments [a, b] (broadcast)."""
+    ab = b - a
+    t = np.clip(((q - a) * ab).sum(-1) / np.maximum((ab * ab).sum(-1), 1e-300), 0, 1)
+    return np.linalg.norm(q - (a + t[..., None] * ab), axis=-1)
+
+
+def _invert(piece, pts, iterations=8):
+    """Parameters s (k,) of the points of piece closest to pts (k, 3): nearest of 513 samples, then Newton
+    on (C(s) - X) . C'(s) = 0 with central differences (one batched evaluation per step)."""
+    grid = np.linspace(0, 1, 513)
+    dense = piece.xyz(grid)
+    s = grid[np.argmin(((pts[:, None, :] - dense[None]) ** 2).sum(-1), axis=1)]
+    h, k = 1e-6, len(pts)
+    for _ in range(iterations):
+        c, cp, cm = np.split(piece.xyz(np.concatenate([s, s + h, s - h])), 3)
+        d, dd = (cp - cm) / (2 * h), (cp - 2 * c + cm) / (h * h)
+        r = c - pts
+        g = (r * d).sum(1)
+        hess = (d * d).sum(1) + (r * dd).sum(1)
+        step = np.where(hess > 1e-300, g / np.where(hess > 1e-300, hess, 1.0), 0.0)
+        s = np.clip(s - step, 0, 1)
+    return s, np.linalg.norm(piece.xyz(s) - pts, axis=1)[:k]
+
+
+class Edges:
+    """Groups of coincident pieces, sampled once; global vertices."""
+
+    def __init__(self, faces, tol, eps):
+        from scipy.sparse.csgraph import connected_components
+        from scipy.sparse import coo_matrix
+        from scipy.spatial import cKDTree
+
+        self.tol, self.eps = tol, eps
+        self.pieces = [p for f in faces for loop in f.loops for p in loop]
+        ends = np.concatenate([p.xyz(np.array([0.0, 1.0])) for p in self.pieces])
+        pairs = cKDTree(ends).query_pairs(eps, output_type="ndarray")
+        n = len(ends)
+        graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) \
+            else coo_matrix((n, n))
+        _, label = connected_components(graph, directed=False)
+        _, corner = np.unique(label, return_inverse=True)
+        self.corner = corner.reshape(-1, 2)                          # (pieces, 2) corner ids
+        self.vertices = [ends[np.unique(corner, return_index=True)[1]]]
+        self.nvert = len(self.vertices[0])
+        lengths = np.array([np.linalg.norm(np.diff(p.xyz(np.linspace(0, 1, 17)), axis=0), axis=1).sum()
+                            for p in self.pieces])
+        self.degenerate = lengths < eps
+        self.group = -np.ones(len(self.pieces), int)
+        self.same_dir = np.ones(len(self.pieces), bool)
+        reps = []
+        for i, p in enumerate(self.pieces):
+            if self.degenerate[i] or self.group[i] >= 0:
+                continue
+            self.group[i] = len(reps)
+            reps.append(i)
+            key = set(self.corner[i])
+            mid = None
+            for j in range(i + 1, len(self.pieces)):
+                if self.group[j] >= 0 or self.degenerate[j] or set(self.corner[j]) != key:
+                    continue
+                if mid is None:
+                    mid = p.xyz(np.array([0.25, 0.5, 0.75]))
+                q = self.pieces[j].xyz(np.array([0.25, 0.5, 0.75]))
+                sq, dq = _invert(p, q)
+                if dq.max() < eps:
+                    self.group[j] = self.group[i]
+                    self.same_dir[j] = sq[2] > sq[0]
+        self.reps = reps
+        self.version = np.zeros(len(reps), int)
+        self.rep_s = [_sample_piece(self.pieces[r], tol) for r in reps]
+        self.rep_ids = [None] * len(reps)
+        self.member_s = {}
+        self._assign_ids()
+
+    def _assign_ids(self):
+        for g, r in enumerate(self.reps):
+            if self.rep_ids[g] is not None and len(self.rep_ids[g]) == len(self.rep_s[g]):
+                continue
+            s = self.rep_s[g]
+            inner = self.pieces[r].xyz(s[1:-1])
+            ids = np.concatenate([[self.corner[r, 0]], self.nvert + np.arange(len(inner)), [self.corner[r, 1]]])
+            self.vertices.append(inner)
+            self.nvert += len(inner)
+            self.rep_ids[g] = ids
+            for j in np.flatnonzero(self.group == g):
+                if j == r:
+                    self.member_s[j] = s
+                    continue
+                pts = self.pieces[r].xyz(s)
+                sj, _ = _invert(self.pieces[j], pts)
+                sj[[0, -1]] = (0.0, 1.0) if self.same_dir[j] else (1.0, 0.0)
+                self.member_s[j] = sj
+
+    def split(self, requests) -> None:
+        """Insert the midpoint of rep segments {(group, index)}."""
+        for g in {g for g, _ in requests}:
+            idx = np.array(sorted({k for gg, k in requests if gg == g}))
+            s = self.rep_s[g]
+            self.rep_s[g] = np.unique(np.concatenate([s, 0.5 * (s[idx] + s[idx + 1])]))
+            if len(self.rep_s[g]) > 100_000:
+                raise BackendError("a trimming loop keeps needing splits: do the face's loops cross or touch?")
+            self.rep_ids[g] = None
+            self.version[g] += 1
+        self._assign_ids()
+
+    def coords(self) -> np.ndarray:
+        return np.concatenate(self.vertices)
+
+    def samples(self, j, degenerate_s):
+        """(s (k,), vertex ids (k,), group, rep indices (k,)) of piece j, in the piece's direction."""
+        if self.degenerate[j]:
+            s = degenerate_s
+            return s, np.full(len(s), self.corner[j, 0]), -1, np.zeros(len(s), int)
+        g = self.group[j]
+        sj = self.member_s[j]
+        idx = np.arange(len(sj))
+        if not self.same_dir[j]:
+            sj, idx = sj[::-1], idx[::-1]
+        return sj, self.rep_ids[g][idx], g, idx

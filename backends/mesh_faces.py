@@ -1,0 +1,163 @@
+"""The faces the mesher works on: each model surface or trimmed face as a parameter-space patch
+(`rgm.backends.mesh_surface`) with its boundary loops as pieces uv(s), s in [0, 1].
+
+An untrimmed surface is bounded by its domain rectangle (sides broken at the knots); a trimmed face by
+its trimming curves: 2-D curves as given, 3-D curves by projection onto the surface, lazy intersections
+approximated at the tolerance the caller passes (a tenth of the mesh tolerance). A plane's patch box is
+the bounding box of its loops' plane coordinates.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rgm.errors import BackendError
+
+from .mesh_edges import Piece
+from .mesh_surface import Patch, surface_patch
+
+
+@dataclass
+class Face:
+    """A patch, its boundary loops (list of lists of `Piece`) and, once meshed, its triangles."""
+
+    patch: Patch
+    loops: list
+    trimmed: bool
+    grid: tuple | None = None                      # initial grid lines (gu, gv) in (u, v)
+    tri: np.ndarray | None = None                  # (t, 3) global vertex ids
+    tri_uv: np.ndarray | None = None               # (t, 3, 2) parameters of the triangle corners
+
+
+def _curve_piece(patch, nurbs, a=None, b=None):
+    """Piece following a 2-D NurbsCurve from parameter a to b (default: its whole domain)."""
+    t0, t1 = nurbs.domain
+    a = t0 if a is None else a
+    b = t1 if b is None else b
+    knots = np.unique(nurbs.knots)
+    inner = (knots - a) / (b - a)
+    breaks = np.unique(np.concatenate([[0.0, 1.0], inner[(inner > 0) & (inner < 1)]]))
+    return Piece(patch, lambda s: nurbs.evaluate(np.clip(a + s * (b - a), t0, t1)), breaks)
+
+
+def _line_piece(patch, p, q):
+    p, q = np.asarray(p, float), np.asarray(q, float)
+    return Piece(patch, lambda s: p + np.asarray(s)[:, None] * (q - p))
+
+
+def _intersection_pieces(patch, inter, surface, prev_end, next_start, tol):
+    """The part of a lazy intersection's uv branch running from `prev_end` to `next_start` (uv, or None
+    when the loop is this one closed branch)."""
+    branches = inter.uv_curves(surface, tol)
+    if prev_end is None:
+        closed = [c for c in branches if np.linalg.norm(c.evaluate(np.array(c.domain))[0]
+                                                        - c.evaluate(np.array(c.domain))[1]) < 1e-6]
+        if len(closed) != 1:
+            raise BackendError(f"the intersection gives {len(closed)} closed branches; a loop needs exactly one")
+        return _curve_piece(patch, closed[0])
+    best = None
+    for c in branches:
+        t = np.linspace(*c.domain, 513)
+        pts = c.evaluate(t)
+        ia = int(np.argmin(np.linalg.norm(pts - prev_end, axis=1)))
+        ib = int(np.argmin(np.linalg.norm(pts - next_start, axis=1)))
+        err = np.linalg.norm(pts[ia] - prev_end) + np.linalg.norm(pts[ib] - next_start)
+        if best is None or err < best[0]:
+            best = (err, c, t[ia], t[ib])
+    _, c, a, b = best
+    return _curve_piece(patch, c, a, b)
+
+
+def _loop_pieces(loop, surface, patch, tol) -> list:
+    """Pieces of a trimming loop in the patch's (u, v)."""
+    from rgm.model import IntersectionCurve, Plane
+
+    out = []
+    for piece in loop.pieces:
+        if isinstance(piece, IntersectionCurve):
+            out.append(piece)
+        elif piece.dim == 2:
+            out.append(_curve_piece(patch, piece.nurbs()))
+        else:
+            c = piece.nurbs()
+            t0, t1 = c.domain
+            if isinstance(surface, Plane):
+                out.append(Piece(patch, lambda s, c=c: surface.coordinates(c.evaluate(t0 + s * (t1 - t0)))))
+            else:
+                out.append(Piece(patch, lambda s, c=c: patch.closest(c.evaluate(t0 + s * (t1 - t0)))[0]))
+    for k, p in enumerate(out):
+        if not isinstance(p, Piece):
+            closed = len(out) == 1
+            prev_end = None if closed else out[k - 1].uv(np.array([1.0]))[0]
+            next_start = None if closed else out[(k + 1) % len(out)].uv(np.array([0.0]))[0]
+            out[k] = _intersection_pieces(patch, p, surface, prev_end, next_start, tol)
+    return out
+
+
+def _rectangle(patch) -> list:
+    """The four sides of the domain, counter-clockwise in (u, v), with the knots as breaks."""
+    (u0, u1), (v0, v1) = patch.domain
+    c = [(u0, v0), (u1, v0), (u1, v1), (u0, v1)]
+    su = (patch.breaks_u - u0) / (u1 - u0)
+    sv = (patch.breaks_v - v0) / (v1 - v0)
+    breaks = (su, sv, 1 - su, 1 - sv)
+    return [[_with_breaks(_line_piece(patch, c[k], c[(k + 1) % 4]), breaks[k]) for k in range(4)]]
+
+
+def _with_breaks(piece, s):
+    piece.breaks = np.unique(np.concatenate([[0.0, 1.0], np.clip(s, 0, 1)]))
+    return piece
+
+
+def collect_faces(objs, tol) -> list:
+    """Face records for model objects (surfaces, trimmed faces, shells); curves are skipped."""
+    from rgm.model import Curve, Plane, Shell, Surface, TrimmedFace
+
+    faces = []
+    for obj in objs:
+        if isinstance(obj, Shell):
+            faces += collect_faces(obj.faces, tol)
+        elif isinstance(obj, TrimmedFace):
+            faces.append(_trimmed_face(obj, tol))
+        elif isinstance(obj, Plane):
+            raise BackendError(f"`{obj.name or 'plane'}` is an infinite plane; trim it with a loop to mesh it")
+        elif isinstance(obj, Surface):
+            faces += [Face(p, _rectangle(p), False) for p in surface_patch(obj, trimmed=False).pieces()]
+        elif not isinstance(obj, Curve):
+            raise BackendError(f"{type(obj).__name__} cannot be tessellated")
+    return faces
+
+
+def _trimmed_face(face, tol):
+    from rgm.model import Plane
+
+    surface = face.surface
+    if face.outer is None:
+        if isinstance(surface, Plane):
+            raise BackendError("an infinite plane needs an outer loop to be meshed")
+        patch = surface_patch(surface, trimmed=False)
+        return Face(patch, _rectangle(patch) + [], True)
+    box = None
+    if isinstance(surface, Plane):  # the patch box: the loops' plane coordinates
+        probe = PlanePatchBox(surface)
+        uv = np.concatenate([p.uv(np.linspace(0, 1, 65)) for loop in face.loops()
+                             for p in _loop_pieces(loop, surface, probe, tol)])
+        lo, hi = uv.min(0), uv.max(0)
+        pad = 1e-9 * float(np.max(hi - lo)) + 1e-12
+        box = ((lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad))
+    patch = surface_patch(surface, trimmed=True, plane_box=box)
+    return Face(patch, [_loop_pieces(loop, surface, patch, tol) for loop in face.loops()], True)
+
+
+class PlanePatchBox(Patch):
+    """A stand-in patch for a plane whose box is not yet known (only loop coordinates are asked)."""
+
+    def __init__(self, plane):
+        from .mesh_surface import PlanePatch
+
+        self.inner = PlanePatch(plane, ((-np.inf, np.inf), (-np.inf, np.inf)))
+        self.domain = self.inner.domain
+
+    def d1(self, u, v):
+        return self.inner.d1(u, v)

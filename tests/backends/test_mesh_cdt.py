@@ -1,0 +1,85 @@
+"""The constrained Delaunay step of the mesher: for random star-shaped outer loops with a hole and free
+points (a grid, and points crowding the boundary segments so that plain Delaunay loses them), the
+triangles cover exactly the region between the loops (area equal to the polygon's), every segment is
+an edge of exactly one triangle, every other edge of exactly two, and all triangles are
+counter-clockwise."""
+import numpy as np
+import pytest
+from hypothesis import assume, given, settings, strategies as st
+
+from rgm.backends.mesh_cdt import OnSegment, constrained_delaunay
+from rgm.errors import BackendError
+
+
+def signed_area(poly):
+    return 0.5 * np.sum(poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1])
+
+
+def closed_segments(start, count):
+    i = np.arange(count)
+    return start + np.column_stack([i, (i + 1) % count])
+
+
+def check_cover(points, tri, segments, want_area):
+    a, b, c = points[tri[:, 0]], points[tri[:, 1]], points[tri[:, 2]]
+    area = 0.5 * ((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0]))
+    assert (area > 0).all()
+    assert area.sum() == pytest.approx(want_area, rel=1e-12, abs=1e-14)
+    n = len(points)
+    e = np.sort(np.stack([tri, np.roll(tri, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+    keys, counts = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
+    s = np.sort(segments, axis=1)
+    skeys = s[:, 0] * n + s[:, 1]
+    assert np.isin(skeys, keys).all()
+    assert (counts[np.isin(keys, skeys)] == 1).all() and (counts[~np.isin(keys, skeys)] == 2).all()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_random_loops_with_crowded_boundaries(seed):
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(6, 40))
+    ang = 2 * np.pi * (np.arange(k) + rng.uniform(-0.3, 0.3, k)) / k
+    outer = np.column_stack([np.cos(ang), np.sin(ang)]) * rng.uniform(0.7, 1.0, (k, 1))
+    a, b = outer, np.roll(outer, -1, axis=0)
+    assume((np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]) / np.linalg.norm(b - a, axis=1)).min() > 0.4)
+    h = int(rng.integers(3, 20))
+    hole = 0.2 * np.column_stack([np.cos(-np.linspace(0, 2 * np.pi, h, endpoint=False)),
+                                  np.sin(-np.linspace(0, 2 * np.pi, h, endpoint=False))]) + rng.uniform(-0.05, 0.05, 2)
+    g = np.linspace(-1, 1, int(rng.integers(3, 30)))
+    grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    grid = grid[np.linalg.norm(grid, axis=1) < 0.55]
+    crowd = 0.5 * (a + b) * (1 - rng.uniform(1e-4, 0.05, (k, 1)))    # just inside each outer segment
+    points = np.concatenate([outer, hole, grid, crowd])
+    segments = np.concatenate([closed_segments(0, k), closed_segments(k, h)])
+    try:
+        tri = constrained_delaunay(points, segments, [np.arange(k), k + np.arange(h)], n_fixed=k + h)
+    except OnSegment:   # a grid point exactly on the hole's boundary: the mesher drops such points
+        return
+    check_cover(points, tri, segments, signed_area(outer) + signed_area(hole))
+
+
+def test_collinear_boundary_samples_and_a_regular_grid():
+    """A square sampled finely on its straight sides around a coarse regular grid: many cocircular and
+    collinear points, every side segment kept."""
+    s = np.linspace(0, 1, 41)[:-1]
+    square = np.concatenate([np.column_stack([s, 0 * s]), np.column_stack([1 + 0 * s, s]),
+                             np.column_stack([1 - s, 1 + 0 * s]), np.column_stack([0 * s, 1 - s])])
+    g = np.linspace(0, 1, 7)[1:-1]
+    grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    points = np.concatenate([square, grid])
+    segments = closed_segments(0, len(square))
+    tri = constrained_delaunay(points, segments, [np.arange(len(square))], n_fixed=len(square))
+    check_cover(points, tri, segments, 1.0)
+
+
+def test_free_point_on_a_segment_is_reported_and_crossing_loops_refused():
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    points = np.concatenate([square, [[0.5, 0.0], [0.5, 0.5]]])
+    with pytest.raises(OnSegment) as err:
+        constrained_delaunay(points, closed_segments(0, 4), [np.arange(4)], n_fixed=4)
+    assert err.value.ids.tolist() == [4]
+    crossing = np.concatenate([square, square + [0.5, 0.25]])
+    with pytest.raises(BackendError, match="cross"):
+        constrained_delaunay(crossing, np.concatenate([closed_segments(0, 4), closed_segments(4, 4)]),
+                             [np.arange(4), 4 + np.arange(4)])
