@@ -46,7 +46,7 @@ def _samples(knots, degree, n, polygon, budget=600):
 
     polygon : (n-1,) lengths of the control polygon legs (for a surface direction, the largest over
     the other direction). A span gets between 2p+2 and 64 samples, about one per 1/64 of the whole
-    polygon's length; the total is kept near `budget` (at least 2 per span). Returns (params (s,), breaks (b,)) where breaks
+    polygon's length; the total is kept near `budget` (at least 1 per span). Returns (params (s,), breaks (b,)) where breaks
     are the domain ends and the C0 knots, and every interior C0 knot also appears once more just
     below itself, so that both one-sided pieces get a start there.
     """
@@ -56,7 +56,7 @@ def _samples(knots, degree, n, polygon, budget=600):
     span_length = cumulative[first] - cumulative[first - degree]
     total = max(float(cumulative[-1]), 1e-300)
     per_span = np.clip(np.ceil(64 * span_length / total), 2 * degree + 2, 64).astype(int)
-    per_span = np.maximum(per_span * min(1.0, budget / per_span.sum()), 2).astype(int)
+    per_span = np.maximum(per_span * min(1.0, budget / per_span.sum()), 1).astype(int)
     params = [values[:-1, None][i] + np.diff(values)[i] * np.arange(c) / c for i, c in enumerate(per_span)]
     kinks = values[1:-1][counts[1:-1] >= degree]
     breaks = np.r_[values[0], kinks, values[-1]]
