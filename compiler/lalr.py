@@ -15,7 +15,6 @@ caller re-parses with lark's own parser, whose interactive state the recovery ne
 from __future__ import annotations
 
 import re
-from bisect import bisect_right
 
 from lark import Lark
 from lark.parsers.lalr_analysis import Shift
@@ -25,7 +24,7 @@ _ORDER = ("NET", "COMMENT", "NUMBER", "STRING", "ANNOTATION", "NAME", "DEFINE")
 _BLANK = "[ \t\f\r\n]"
 
 
-_NEWLINE = re.compile("\n")
+_KIND_CACHE = 200_000   # distinct token spellings remembered between parses
 
 
 class Tok:
@@ -61,11 +60,16 @@ class FastLALR:
                          if t.pattern.type == "str" and name_re.fullmatch(t.pattern.value)}
         rest = sorted((n for n in terms if n not in _ORDER + ("WS",) and n not in self.keywords.values()),
                       key=lambda n: -len(terms[n].pattern.value))
-        groups = [f"(?P<{n}>{terms[n].pattern.to_regexp()})" for n in _ORDER + tuple(rest)]
-        # blanks are skipped as each token's prefix; any other character matches _ERROR, so nothing
-        # is passed over silently (trailing blanks simply end the iteration)
-        self.master = re.compile(f"{_BLANK}*(?:" + "|".join(groups + [f"(?P<_ERROR>(?!{_BLANK}).)"]) + ")",
-                                 re.DOTALL)
+        order = _ORDER + tuple(rest)
+        # any other character is an _ERROR token, so nothing is passed over silently
+        alternatives = [terms[n].pattern.to_regexp() for n in order] + [f"(?!{_BLANK})."]
+        # one C call splits the text into (blanks, token) pairs (trailing blanks simply end it) ...
+        self.splitter = re.compile(f"({_BLANK}*)(" + "|".join(f"(?:{a})" for a in alternatives) + ")", re.DOTALL)
+        # ... and a token's kind is found once per distinct spelling: the first alternative that
+        # matches it whole is the one that matched it in the text (terminals have no lookahead)
+        self.classify = re.compile("|".join(f"(?P<{n}>{a})" for n, a in zip(order + ("_ERROR",), alternatives)),
+                                   re.DOTALL).fullmatch
+        self.kinds: dict[str, str] = {}
         # punctuation that no rule keeps (`(`, `,`, `:`, `.`) needs no token object
         kept = {sym.name for rule in frontend.callbacks for sym in rule.expansion
                 if sym.is_term and not sym.filter_out}
@@ -131,39 +135,51 @@ class FastLALR:
 
     def parse(self, text: str, on_comment) -> bool:
         """Parse `text`, calling the builder as lark would; False at the first error (nothing is
-        undone: the caller discards what was built and re-parses with lark). Lines and columns come
-        from a bisection in the list of newline offsets."""
+        undone: the caller discards what was built and re-parses with lark). Lines and columns are
+        counted along the way: only blanks and nets can hold a newline."""
         actions, keywords, end_state, dropped = self.actions, self.keywords, self.end_state, self.dropped
-        newlines = [m.start() for m in _NEWLINE.finditer(text)]
+        kinds, classify = self.kinds, self.classify
+        if len(kinds) > _KIND_CACHE:
+            kinds.clear()
         state_stack = [self.start_state]
         values: list = []
-        tokens = self.master.finditer(text)
-        while True:
-            m = next(tokens, None)
-            if m is None:
+        pos, line, bol = 0, 1, 0           # offset after the last token, its line, where that line begins
+        pairs = self.splitter.findall(text)
+        pairs.append(("", None))
+        for blank, value in pairs:
+            if value is None:
                 tok, kind = None, "$END"
             else:
-                kind = m.lastgroup
+                start = pos + len(blank)
+                pos = start + len(value)
+                if "\n" in blank:
+                    line += blank.count("\n")
+                    bol = start - len(blank) + blank.rindex("\n") + 1
+                kind = kinds.get(value)
+                if kind is None:
+                    kind = kinds[value] = classify(value).lastgroup
                 if kind in dropped:
                     tok = None
-                else:
-                    start, end = m.span(kind)
-                    if kind == "_ERROR":
-                        return False
-                    value = m.group(kind)
-                    line = bisect_right(newlines, start)
-                    col = start - (newlines[line - 1] if line else -1)
-                    if kind == "NET":
-                        end_line = bisect_right(newlines, end - 1)
-                        end_col = end - (newlines[end_line - 1] if end_line else -1)
-                        tok = Tok(kind, value, start, end, line + 1, col, end_line + 1, end_col)
+                elif kind == "NAME":
+                    tok = Tok(kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1)
+                    if value in keywords and keywords[value] in actions[state_stack[-1]]:
+                        kind = tok.type = keywords[value]
+                elif kind == "NET":
+                    col = start - bol + 1
+                    if "\n" in value:
+                        end_line = line + value.count("\n")
+                        bol = start + value.rindex("\n") + 1
                     else:
-                        tok = Tok(kind, value, start, end, line + 1, col, line + 1, col + end - start)
+                        end_line = line
+                    tok = Tok(kind, value, start, pos, line, col, end_line, pos - bol + 1)
+                    line = end_line
+                else:
+                    tok = Tok(kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1)
                     if kind == "COMMENT":
                         on_comment(tok)
                         continue
-                    if kind == "NAME" and value in keywords and keywords[value] in actions[state_stack[-1]]:
-                        kind = tok.type = keywords[value]
+                    if kind == "_ERROR":
+                        return False
             while True:     # reduce while the table says so, then shift
                 action = actions[state_stack[-1]].get(kind)
                 if action is None:
@@ -187,3 +203,4 @@ class FastLALR:
                 values.append(value)
                 if goto == end_state and kind == "$END":
                     return True
+        return False

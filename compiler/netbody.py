@@ -1,18 +1,18 @@
-"""Reading the dense numeric form `net 40 x 40 [x y z, x y z, ...]` in one piece with numpy.
+"""Reading the dense numeric form `net 40 x 40 [x y z, x y z, ...]` in one piece.
 
-The lexer hands the whole net over as a single token; this module checks and converts its body with
-a few vectorised passes over the characters (no Python loop per number), so a 1000 x 1000 control net
-of 30 MB costs about one `str.split` plus one float conversion:
-  1. a 256-entry lookup table classifies every byte of the body (number character, comma, blank,
-     anything else: an error);
-  2. number starts (a number character after a non-number one) are counted per entry (entries are
-     separated by commas) with np.bincount: every entry must hold the same count `width`;
-  3. the numbers are converted by numpy's C reader (`np.fromstring(body.replace(',', ' '), sep=' ')`),
-     which is strict on malformed numbers; any doubt is settled token by token with float().
+The lexer hands the whole net over as a single token; `read_net` checks and converts its body. Two
+readers share the work:
+  * the exact reader (`_entries`, `_convert`): plain Python over the text, `str.split` per entry and
+    `float` per number. It finds every problem with its offsets, and small bodies (the many 4 x 4 nets
+    of a statement-heavy file) use it directly, since it has no fixed cost;
+  * the vectorised reader (`_fast_read`) for large bodies: numpy passes over the bytes, no Python loop
+    per number. It declines (returns None) whenever anything is off, and the exact reader then gives
+    the diagnostic, so both report the same errors. Its number conversion is described in `_decimals`.
 Errors come back as `NetError(message, start, end, hint)` with offsets into the token text.
 """
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass
 
@@ -22,6 +22,8 @@ _HEAD = re.compile(r"net\s+([0-9]+)(?:\s*x\s*([0-9]+))?\s*\[")
 _BAD_CHAR = re.compile(r"[^0-9eE+\-.,\t\n\r\f\v ]")
 _TOKEN = re.compile(r"[^\s,]+")
 MAX_WIDTH = 4
+#: bodies at least this long go to the vectorised reader (below it numpy's fixed costs dominate)
+FAST_MIN = 20_000
 
 
 @dataclass
@@ -36,7 +38,8 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
     """Parse the text of one NET token -> (shape, width, data of shape `shape + (width,)`, read-only).
 
     Raises NetError for a zero dimension, a stray character, an empty or ragged body, an entry width
-    outside 1..4, a count of entries different from the declared shape, or a non-finite number.
+    outside 1..4, a count of entries different from the declared shape, or a malformed or non-finite
+    number (checked in that order).
     """
     head = _HEAD.match(text)
     shape = tuple(int(g) for g in head.groups() if g is not None)
@@ -44,12 +47,35 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
     if 0 in shape or max(shape) > 10**8:
         raise NetError(f"a net needs between 1 and 10^8 rows and columns, not `{' x '.join(map(str, shape))}`",
                        0, head.end() - 1)
-    codes = _classify(body)
-    bad_at = int(np.argmax(codes == _BAD)) if (codes == _BAD).any() else -1
-    if bad_at >= 0:
-        bad = _BAD_CHAR.search(body)           # the character (not byte) offset, for the message
-        ch = bad.group()
-        at = body_start + bad.start()
+    fast = _fast_read(body) if len(body) >= FAST_MIN else None
+    if fast is not None:
+        data, width, count = fast
+    else:
+        entries = _entries(body, body_start)
+        width, count = len(entries[0]), len(entries)
+    if width > MAX_WIDTH:
+        raise NetError(f"entries of a net hold 1 to {MAX_WIDTH} numbers, these hold {width}",
+                       0, len(text), "is a `,` missing between entries?")
+    expected = math.prod(shape)
+    if count != expected:
+        dims = " x ".join(map(str, shape))
+        raise NetError(f"`net {dims}` needs {expected} entries, found {count}", 0, len(text),
+                       "one entry per control point, row after row, separated by `,`")
+    if fast is None:
+        data = _convert(entries, body, body_start)
+    data = data.reshape(shape + (width,))
+    data.flags.writeable = False
+    return shape, width, data
+
+
+# ------------------------------------------------------------------------------------ exact reader
+
+def _entries(body: str, body_start: int) -> list[list[str]]:
+    """The body split into entries of number texts; raises NetError for a stray character, an empty
+    body or an entry whose count differs from the first one's (a trailing comma is allowed)."""
+    bad = _BAD_CHAR.search(body)
+    if bad:
+        ch, at = bad.group(), body_start + bad.start()
         if ch == "#":
             raise NetError("a comment cannot go inside a net", at, at + 1,
                            "put the comment on the line before the binding")
@@ -58,82 +84,166 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
                 "write each entry as `x y z` and separate entries with `,`")
         raise NetError(f"`{shown}` cannot appear in a net: only numbers separated by spaces, and commas "
                        "between entries", at, at + 1, hint)
-    counts, entry_starts = _entry_counts(codes)
-    if counts.size == 0 or not counts.any():
-        raise NetError("this net holds no numbers", 0, len(text), "write entries such as `[0 0 0, 1 0 0]`")
-    width = int(counts[0])
-    ragged = np.flatnonzero(counts != width)
-    if ragged.size:
-        k = int(ragged[0])
-        got = int(counts[k])
-        a, b = _entry_range(body, entry_starts, k)
-        raise NetError(f"entry {k + 1} of this net has {got} number{'s' * (got != 1)}, "
-                       f"but the first entry has {width}", body_start + a, body_start + b,
-                       "every entry has the same count: `x y z` for points, `x y z w` with weights")
-    if width > MAX_WIDTH:
-        raise NetError(f"entries of a net hold 1 to {MAX_WIDTH} numbers, these hold {width}",
-                       0, len(text), "is a `,` missing between entries?")
-    expected = int(np.prod(shape))
-    if counts.size != expected:
-        dims = " x ".join(map(str, shape))
-        raise NetError(f"`net {dims}` needs {expected} entries, found {counts.size}", 0, len(text),
-                       "one entry per control point, row after row, separated by `,`")
+    texts = body.split(",")
+    entries = [t.split() for t in texts]
+    if len(entries) > 1 and not entries[-1]:
+        entries.pop()
+    width = len(entries[0])
+    if not any(entries):
+        raise NetError("this net holds no numbers", 0, len(body) + body_start + 1,
+                       "write entries such as `[0 0 0, 1 0 0]`")
+    for k, entry in enumerate(entries):
+        if len(entry) != width:
+            a = body_start + sum(len(t) + 1 for t in texts[:k])
+            seg = texts[k]
+            lead, core = len(seg) - len(seg.lstrip()), seg.strip()
+            a, b = (a + lead, a + lead + len(core)) if core else (a, a + 1)
+            got = len(entry)
+            raise NetError(f"entry {k + 1} of this net has {got} number{'s' * (got != 1)}, "
+                           f"but the first entry has {width}", a, b,
+                           "every entry has the same count: `x y z` for points, `x y z w` with weights")
+    return entries
+
+
+def _convert(entries: list[list[str]], body: str, body_start: int) -> np.ndarray:
+    """The numbers of `entries` as one flat float64 array; NetError names the first bad number."""
     try:
-        # numpy's C reader raises on anything strtod cannot read up to a blank ("1.2.3", "1e", "-");
-        # the size check catches a token read as two numbers ("1-2")
-        data = np.fromstring(body.replace(",", " "), dtype=float, sep=" ")
-        if data.size != int(counts.sum()):
-            raise ValueError("a token was read as several numbers")
+        data = np.array([float(x) for entry in entries for x in entry], dtype=float)
     except ValueError:
-        for m in _TOKEN.finditer(body):
-            try:
-                float(m.group())
-            except ValueError:
-                raise NetError(f"`{m.group()}` is not a number", body_start + m.start(),
-                               body_start + m.end()) from None
-        # not expected (every token float() accepts, numpy reads as one number); never a traceback
-        raise NetError("the numbers of this net could not be read", 0, len(text)) from None
+        m = next(m for m in _TOKEN.finditer(body) if not _is_float(m.group()))
+        raise NetError(f"`{m.group()}` is not a number", body_start + m.start(), body_start + m.end()) from None
     if not np.isfinite(data).all():
         m = next(m for m in _TOKEN.finditer(body) if not np.isfinite(float(m.group())))
         raise NetError(f"`{m.group()}` is too large for a 64-bit float", body_start + m.start(),
                        body_start + m.end())
-    data = data.reshape(shape + (width,))
-    data.flags.writeable = False
-    return shape, width, data
+    return data
 
 
-_BAD, _NUMBER, _COMMA, _BLANK = 0, 1, 2, 3
-_CLASSES = np.zeros(256, dtype=np.uint8)
-_CLASSES[np.frombuffer(b"0123456789eE+-.", dtype=np.uint8)] = _NUMBER
-_CLASSES[ord(",")] = _COMMA
-_CLASSES[np.frombuffer(b" \t\n\r\f\v", dtype=np.uint8)] = _BLANK
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+        return True
+    except ValueError:
+        return False
 
 
-def _classify(body: str) -> np.ndarray:
-    """One class per byte of the body (number character, comma, blank, or anything else), by a
-    256-entry lookup table: a single vectorised pass instead of one regex scan per question."""
-    return _CLASSES[np.frombuffer(body.encode("utf-8", errors="replace"), dtype=np.uint8)]
+# ------------------------------------------------------------------------------------ vectorised reader
+
+_PAD = 16    # blank bytes on either side of the body, so that 16-byte windows never leave the buffer
+_BLANK, _NUMBER, _COMMA, _OTHER = 0, 1, 2, 3
+_CLASSES = bytes(_NUMBER if c in b"0123456789eE+-." else _COMMA if c == ord(",") else
+                 _BLANK if c in b" \t\n\r\f\v" else _OTHER for c in range(256))
 
 
-def _entry_counts(codes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Numbers per entry (a trailing comma is allowed) and the byte offset where each entry begins.
-    Valid bodies are ASCII, so byte offsets are character offsets."""
-    commas = np.flatnonzero(codes == _COMMA)
-    number = codes == _NUMBER
-    starts = np.flatnonzero(number & ~np.concatenate(([False], number[:-1])))
-    # the entry of a number is the count of commas before it (a bool cumsum is slow: search instead)
-    counts = np.bincount(np.searchsorted(commas, starts), minlength=commas.size + 1)
-    entry_starts = np.concatenate(([0], commas + 1))
-    if counts.size > 1 and counts[-1] == 0:
-        counts, entry_starts = counts[:-1], entry_starts[:-1]
-    return counts, entry_starts
+def _fast_read(body: str) -> tuple[np.ndarray, int, int] | None:
+    """(flat data, width, entry count) of a well-formed body, or None for anything the exact reader
+    should look at: a stray character, a ragged or empty body, a number that does not read."""
+    if not body.isascii():
+        return None
+    raw = bytearray(b" " * _PAD)
+    raw += body.encode("ascii")
+    raw += b" " * _PAD
+    cls = np.frombuffer(raw.translate(_CLASSES), dtype=np.uint8)
+    if cls.max() == _OTHER:
+        return None
+    number = cls == _NUMBER
+    edges = np.flatnonzero(number[1:] != number[:-1]) + 1    # the padding makes them come in pairs
+    starts, ends = edges[0::2], edges[1::2]
+    commas = np.flatnonzero(cls == _COMMA)
+    if starts.size == 0:
+        return None
+    # every entry holds as many numbers as the first: comma j follows number (j + 1) * width - 1
+    # and precedes number (j + 1) * width; one comma after the last number is allowed
+    width = int(np.searchsorted(starts, commas[0])) if commas.size else int(starts.size)
+    count = starts.size // width if width else 0
+    if width == 0 or count * width != starts.size or commas.size not in (count - 1, count):
+        return None
+    after = (np.arange(1, commas.size + 1) * width)
+    inner = after < starts.size
+    if not ((ends[after - 1] <= commas).all() and (commas[inner] < starts[after[inner]]).all()):
+        return None
+    data = _decimals(raw, body, starts, ends)
+    if data is None or not np.isfinite(data).all():
+        return None
+    return data, width, count
 
 
-def _entry_range(body: str, entry_starts: np.ndarray, k: int) -> tuple[int, int]:
-    """Offsets of entry k with its surrounding spaces trimmed (at least one character)."""
-    a = int(entry_starts[k])
-    b = int(entry_starts[k + 1]) - 1 if k + 1 < entry_starts.size else len(body)
-    seg = body[a:b]
-    lead = len(seg) - len(seg.lstrip())
-    a2, b2 = a + lead, a + len(seg.rstrip())
-    return (a2, b2) if b2 > a2 else (a, a + 1)
+_U64 = np.uint64
+_ALL, _BYTES, _HIGH = _U64(2**64 - 1), _U64(0x0101010101010101), _U64(0xF0F0F0F0F0F0F0F0)
+_ZEROS = _U64(0x3030303030303030)
+#: by s = how many of a word's 8 bytes belong to the number (its top s bytes): the mask that keeps
+#: them, and '0' characters for the others
+_KEEP = np.array([(2**64 - 1) ^ (2**(64 - 8 * s) - 1) if s else 0 for s in range(9)], dtype=np.uint64)
+_FILL = np.array([0x3030303030303030 & (2**(64 - 8 * s) - 1) for s in range(9)], dtype=np.uint64)
+#: by c = bytes from the dot to the number's end (0: no dot): the value of one unit of the digits
+_SCALE = np.concatenate(([1.0], 10.0 ** np.arange(17)))
+
+
+def _bytesum(words: np.ndarray) -> np.ndarray:
+    """Sum of the 8 bytes of each word (each byte 0 or 1)."""
+    return (words * _BYTES) >> _U64(56)
+
+
+def _digits8(v: np.ndarray) -> np.ndarray:
+    """The 8-digit integer of each word whose bytes are digit values 0..9, first byte most significant:
+    three multiply-shift steps (SIMD within a register, D. Lemire, "Fast number parsing", 2021)."""
+    v = (v * _U64(2561)) >> _U64(8)
+    v = ((v & _U64(0x00FF00FF00FF00FF)) * _U64(6553601)) >> _U64(16)
+    return ((v & _U64(0x0000FFFF0000FFFF)) * _U64(42949672960001)) >> _U64(32)
+
+
+def _decimals(raw, body: str, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
+    """The numbers at raw[starts:ends] as float64, exactly as strtod reads them; None if one is not a number.
+
+    Plain decimals `-?ddd.ddd` of at most 16 characters after the sign are converted without a Python
+    loop: each is read as the one or two 8-byte words that end where it ends (bytes before it become
+    '0'), its dot is taken out by shifting the bytes before it up by one, and each word's digits
+    combine into an integer (`_digits8`). The integer M and 10^k are exact doubles (M <= 2^53), so
+    M / 10^k is the correctly rounded value (Clinger's fast path). Anything else (exponents, `+`,
+    longer numbers) goes to float() one by one, or to numpy's strtod loop when they are many.
+    """
+    negative = np.frombuffer(raw, dtype=np.uint8).take(starts) == ord("-")
+    length = ends - starts - negative                 # characters after the sign
+    nwords = 2 if length.max() > 8 else 1
+    every = np.ndarray((len(raw) - 7,), dtype="<u8", buffer=raw, strides=(1,))   # a word at every offset
+    words, dots = [], []
+    for k in range(nwords):                           # word k holds window bytes 8k .. 8k + 7
+        inside = np.clip(length - 8 * (nwords - 1 - k), 0, 8)
+        w = (every[ends - 8 * (nwords - k)] & _KEEP.take(inside)) | _FILL.take(inside)
+        words.append(w)
+        dots.append((w.view(np.uint8) == ord(".")).view(np.uint64))    # 1 in each byte that is a dot
+    ndots = sum(_bytesum(d) for d in dots)
+    from_dot, seen = [], 0                            # 1 in each byte from the dot on
+    for d in dots:
+        d = d | seen
+        for shift in (8, 16, 32):
+            d |= d << _U64(shift)
+        from_dot.append(d)
+        seen = (d != 0) * _BYTES
+    c = sum(_bytesum(d) for d in from_dot)
+    undotted = (ndots == 0) * _ALL
+    mantissa, carry, bad = None, 0, (ndots > 1) | (length > 8 * nwords) | (length <= ndots)
+    for w, d, after in zip(words, dots, from_dot):
+        v = (w ^ _ZEROS) & ~(d * _U64(255))            # digit values; the dot is 0, others keep high bits
+        bad |= (v & _HIGH) != 0
+        keep = after * _U64(255) | undotted            # bytes from the dot on stay, the rest move up
+        moved = v & ~keep
+        v = (v & keep) | (moved << _U64(8)) | carry
+        carry = moved >> _U64(56)
+        mantissa = _digits8(v) if mantissa is None else mantissa * _U64(10**8) + _digits8(v)
+    bad |= mantissa > _U64(2**53)
+    values = mantissa.view(np.int64) / _SCALE.take(c)   # int64 converts to float faster than uint64
+    np.negative(values, where=negative, out=values)
+    redo = np.flatnonzero(bad)
+    if redo.size > values.size // 8:        # mostly other forms (say, 17-digit reprs): strtod over all
+        try:
+            values = np.fromstring(body.replace(",", " "), dtype=float, sep=" ")
+        except ValueError:
+            return None
+        return values if values.size == starts.size else None   # "1-2" reads as two numbers
+    for i in redo.tolist():
+        try:
+            values[i] = float(body[starts[i] - _PAD:ends[i] - _PAD])
+        except ValueError:
+            return None
+    return values

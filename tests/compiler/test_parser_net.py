@@ -1,8 +1,11 @@
 """The dense net form: one token, read by numpy in one piece; shapes, widths, layout and errors."""
-import numpy as np
-from hypothesis import given, settings, strategies as st
+import random
 
-from rgm.compiler.netbody import NetError, read_net
+import numpy as np
+from hypothesis import HealthCheck, given, settings, strategies as st
+
+from rgm.compiler import netbody
+from rgm.compiler.netbody import FAST_MIN, NetError, _fast_read, read_net
 from rgm.compiler.parser import parse
 
 
@@ -52,3 +55,54 @@ def test_a_large_net_is_one_token_and_positions_after_it_hold():
     after = program.statements[1]
     assert (after.span.line, after.span.col) == (n + 3, 1)
     assert (net.span.end_line, net.span.end_col) == (n + 2, 2)
+
+
+_FORMS = ["1e5", "+3", "-0", "0.", ".5", "-.5", "5.", "1E-3", "00012.5000", "12345678.12345678",
+          "9999999999999999", "0.000000000000001", "-1234.5678", "0.30000000000000004", "7"]
+
+
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.integers(1, 4), st.integers(0, 2**32))
+def test_the_vectorised_reader_reads_what_float_reads(width, seed):
+    """Large bodies take the numpy path (`_fast_read`); it must give float()'s doubles bit for bit,
+    also for forms it hands back to float() (exponents, `+`, long mantissas)."""
+    rnd = random.Random(seed)
+
+    def number():
+        k = rnd.random()
+        if k < 0.3:
+            return repr(rnd.uniform(-1e4, 1e4))
+        if k < 0.6:
+            return f"{rnd.uniform(-1e5, 1e5):.{rnd.randint(0, 6)}f}"
+        return rnd.choice(_FORMS) if k < 0.7 else str(rnd.randint(-10**9, 10**9))
+    n = rnd.randint(FAST_MIN // (8 * width), FAST_MIN // (2 * width))
+    entries = [[number() for _ in range(width)] for _ in range(n)]
+    body = rnd.choice([", ", ",\n  ", " ,", ","]).join(" ".join(e) for e in entries) + rnd.choice(["", ",", " ,\n"])
+    assert len(body) >= FAST_MIN
+    data, w, count = _fast_read(body)
+    assert (w, count) == (width, n)
+    assert data.tobytes() == np.array([float(x) for e in entries for x in e]).tobytes()
+
+
+@given(st.sampled_from(["1 2 3, 4 5", "1.2.3 4 5", "1 2 3,, 4 5 6", "- 1 2", "1-2 3 4", "1 2 3 ; 4", ",1 2 3",
+                        "1e 2 3", ". 1 2", "1 2 3, 4 5 6 7", "1 2 3, 1e999 0 0", "1 2 3 # no"]),
+       st.integers(0, 3000))
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+def test_both_readers_report_the_same_error(mistake, at):
+    """A large net with one mistake: the numpy path declines and the exact reader reports it, so the
+    diagnostic (message and offsets) is the one a small net would get."""
+    good = ["0.5 1 2"] * 3000
+    good[at:at + 1] = [mistake]
+    text = f"net {len(good) + mistake.count(',')} [" + ", ".join(good) + "]"
+    assert len(text) >= FAST_MIN
+    errors = []
+    for limit in (FAST_MIN, 10**12):      # vectorised first, then the exact reader alone
+        netbody.FAST_MIN = limit
+        try:
+            read_net(text)
+            errors.append(None)
+        except NetError as e:
+            errors.append((e.message, e.start, e.end, e.hint))
+        finally:
+            netbody.FAST_MIN = FAST_MIN
+    assert errors[0] == errors[1] and errors[0] is not None
