@@ -46,6 +46,8 @@ def _lattice(steps: int):
 
 #: samples per triangle: the 6-step barycentric lattice without the corners (15 on the edges, 10 inside)
 _BARY, _EDGE_OF_SAMPLE = _lattice(6)
+#: the edge midpoints and the centroid: measured first, since a failing triangle fails there mostly
+_COARSE = np.flatnonzero((np.isclose(_BARY, 0.5).sum(axis=1) == 2) | np.isclose(_BARY, 1 / 3).all(axis=1))
 _EDGES = np.array([(0, 1), (1, 2), (2, 0)])
 #: initial grid points nearer than this to the boundary (in grid cells) are left out: no slivers
 CLEARANCE = 0.3
@@ -239,24 +241,38 @@ class _FaceMesher:
         at[normal] = 0.5 * (uv[a[normal]] + uv[b[normal]])
         return at[~on_boundary]
 
+    def _deviation(self, v, uvt, samples):
+        """Upper bounds (t, k) of the distance to the surface of barycentric `samples` (k, 3) of triangles
+        v (t, 3, 3): the surface point at the interpolated (u, v), then Gauss-Newton closest points (one
+        step, then two more) where that bound exceeds the limit."""
+        patch, limit = self.face.patch, CERTIFY * self.tol
+        x = np.einsum("sk,tkd->tsd", samples, v).reshape(-1, 3)
+        guess = np.einsum("sk,tkd->tsd", samples, uvt).reshape(-1, 2)
+        dist = np.linalg.norm(x - patch.evaluate(guess[:, 0], guess[:, 1]), axis=1)
+        for iterations in (1, 2):
+            rows = np.flatnonzero(dist > limit)
+            if len(rows) == 0:
+                break
+            guess[rows], d = patch.project(x[rows], guess[rows], iterations=iterations)
+            dist[rows] = np.minimum(dist[rows], d)
+        return dist.reshape(len(v), len(samples))
+
     def _measure(self, v, uvt):
         """(failing (t,), worst (t,)) of triangles v (t, 3, 3) with corner parameters uvt (t, 3, 2): worst
         is the lattice sample of largest deviation, or -1 - k when only the normal fails and edge k
-        (the longest) should be split."""
-        patch, limit = self.face.patch, CERTIFY * self.tol
-        x = np.einsum("sk,tkd->tsd", _BARY, v).reshape(-1, 3)
-        guess = np.einsum("sk,tkd->tsd", _BARY, uvt).reshape(-1, 2)
-        dist = np.linalg.norm(x - patch.evaluate(guess[:, 0], guess[:, 1]), axis=1).reshape(len(v), -1)
-        rough = np.flatnonzero((dist > limit).any(axis=1))      # the plain bound fails: closest points
-        if len(rough):
-            rows = (rough[:, None] * len(_BARY) + np.arange(len(_BARY))).ravel()
-            _, d = patch.project(x[rows], guess[rows], iterations=3)
-            dist[rough] = np.minimum(dist[rough], d.reshape(len(rough), -1))
+        (the longest) should be split. The edge midpoints and centroid are measured first; only the
+        triangles they pass are measured on the whole lattice."""
+        limit = CERTIFY * self.tol
+        dist = np.zeros((len(v), len(_BARY)))
+        dist[:, _COARSE] = self._deviation(v, uvt, _BARY[_COARSE])
+        full = np.flatnonzero((dist[:, _COARSE] <= limit).all(axis=1))
+        if len(full):
+            dist[full] = self._deviation(v[full], uvt[full], _BARY)
         fail, worst = (dist > limit).any(axis=1), np.argmax(dist, axis=1)
         if self.angle_tol:
             n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
             n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-            ns = patch.normal(uvt[..., 0].ravel(), uvt[..., 1].ravel()).reshape(-1, 3, 3)
+            ns = self.face.patch.normal(uvt[..., 0].ravel(), uvt[..., 1].ravel()).reshape(-1, 3, 3)
             valid = np.linalg.norm(ns, axis=2) > 0
             cos = np.einsum("td,tkd->tk", n, ns)
             bent = (valid & (cos < np.cos(self.angle_tol))).any(axis=1) & ~fail

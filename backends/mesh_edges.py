@@ -67,8 +67,9 @@ def segment_distance(q, a, b):
 
 
 def _invert(piece, pts, iterations=8):
-    """Parameters s (k,) of the points of piece closest to pts (k, 3): nearest of 513 samples, then Newton
-    on (C(s) - X) . C'(s) = 0 with central differences (one batched evaluation per step)."""
+    """Parameters s (k,) of the points of piece closest to pts (k, 3): nearest of 513 samples, then up to
+    `iterations` Newton steps on (C(s) - X) . C'(s) = 0 with central differences (one batched
+    evaluation per step), stopping once no parameter moves by more than 1e-13."""
     grid = np.linspace(0, 1, 513)
     dense = piece.xyz(grid)
     s = grid[np.argmin(((pts[:, None, :] - dense[None]) ** 2).sum(-1), axis=1)]
@@ -81,6 +82,8 @@ def _invert(piece, pts, iterations=8):
         hess = (d * d).sum(1) + (r * dd).sum(1)
         step = np.where(hess > 1e-300, g / np.where(hess > 1e-300, hess, 1.0), 0.0)
         s = np.clip(s - step, 0, 1)
+        if np.abs(step).max(initial=0.0) < 1e-13:
+            break
     return s, np.linalg.norm(piece.xyz(s) - pts, axis=1)[:k]
 
 

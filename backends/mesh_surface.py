@@ -138,6 +138,9 @@ class RevolutionPatch(Patch):
         self.a = np.asarray(rev.axis_point, float)
         self.k = np.asarray(rev.axis_dir, float)
         self.domain = ((rev.start, rev.end), self.profile.domain)
+        k = self.k
+        self._cross_k = np.array([[0, k[2], -k[1]], [-k[2], 0, k[0]], [k[1], -k[0], 0]])   # x @ this = k x x
+        self._kk = np.outer(k, k)
         p = self.profile
         self.breaks_u = np.array([rev.start, rev.end])
         self.breaks_v = np.unique(p.knots[p.degree:len(p.knots) - p.degree])
@@ -147,14 +150,14 @@ class RevolutionPatch(Patch):
         u = np.asarray(u, float)
         c = self.profile.derivatives(np.clip(np.asarray(v, float), *self.domain[1]), 1)
         w, dw = c[0] - self.a, c[1]
-        k = self.k
+        kx, kk = self._cross_k, self._kk
         cos, sin = np.cos(u)[:, None], np.sin(u)[:, None]
 
         def rot(x):  # Rodrigues' rotation of rows x about k by angle u
-            return x * cos + np.cross(k, x) * sin + np.outer(x @ k, k) * (1 - cos)
+            return x * cos + (x @ kx) * sin + (x @ kk) * (1 - cos)
 
         rw = rot(w)
-        return self.a + rw, np.cross(k, rw), rot(dw)
+        return self.a + rw, rw @ kx, rot(dw)
 
 
 class PlanePatch(Patch):

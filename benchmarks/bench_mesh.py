@@ -3,12 +3,17 @@
 The same models (the pin revolution, a fitted bicubic patch, a trimmed patch with a hole) are meshed by
 both at the same deflection; both meshes' deviation is measured the same way (every triangle sampled on
 a 6-step barycentric lattice, closest point on rgm's exact surface from a global KD-tree seed + Newton).
-Prints triangle counts, times, measured deviations and ratios. OpenCASCADE is skipped when absent.
+Prints triangle counts, times (best of 3, after a warm-up of both), measured deviations and ratios, and
+rgm's triangle count at OpenCASCADE's *measured* deviation (OpenCASCADE often stays well inside the
+deflection it is given, so equal deflection is not equal accuracy), with PASS/FAIL against the issue's
+targets: no more triangles than OpenCASCADE at equal measured deviation, and no slower.
+OpenCASCADE is skipped when absent.
 
     .venv/bin/python benchmarks/bench_mesh.py
 """
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -70,28 +75,67 @@ def occ_mesh(obj, tol):
     return np.concatenate(verts), np.concatenate(tris), seconds
 
 
+def equal_deviation(obj, target):
+    """rgm's mesh whose measured deviation is as close to `target` as possible without exceeding it: rgm
+    asked for `target`, then once more for target scaled by target / measured (a secant step on the
+    measured deviation), keeping the coarser mesh that stays within `target`."""
+    mesh = tessellate_mesh(obj, target)
+    measured = deviation(obj, mesh.vertices, mesh.triangles)
+    if 0 < measured < target:
+        again = tessellate_mesh(obj, target * target / measured)
+        if deviation(obj, again.vertices, again.triangles) <= target:
+            return again
+    return mesh
+
+
+def best_of(runs, fn):
+    """(result of the last run, least wall time over `runs` runs of fn())."""
+    best = np.inf
+    for _ in range(runs):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return out, best
+
+
 def main():
     try:
-        import OCP  # noqa: F401
+        import OCP  # noqa: F401  (only: is it installed?)
         have_occ = True
     except ImportError:
         have_occ = False
         print("OpenCASCADE (OCP) is not installed: printing rgm's figures only")
+    cases = models()
+    for obj in cases.values():   # warm both up: imports, caches, first-call costs
+        tessellate_mesh(obj, 0.1)
+        if have_occ:
+            occ_mesh(obj, 0.1)
+    print("best of 3 runs each; deviation measured the same way for both (lattice samples, closest point)")
     print(f"{'model':18} {'tol':>6} | {'rgm tris':>8} {'time s':>7} {'max dev':>9} | "
-          f"{'occ tris':>8} {'time s':>7} {'max dev':>9} | {'tris ratio':>10} {'time ratio':>10}")
-    for name, obj in models().items():
+          f"{'occ tris':>8} {'time s':>7} {'max dev':>9} | {'time ratio':>10} | {'rgm tris at occ dev':>19} {'ratio':>6}")
+    worst_tris, worst_time = 0.0, 0.0
+    for name, obj in cases.items():
         for tol in (0.1, 0.01):
-            t0 = time.perf_counter()
-            mesh = tessellate_mesh(obj, tol)
-            t_rgm = time.perf_counter() - t0
+            mesh, t_rgm = best_of(3, lambda: tessellate_mesh(obj, tol))
             d_rgm = deviation(obj, mesh.vertices, mesh.triangles)
             row = f"{name:18} {tol:6.3g} | {len(mesh.triangles):8d} {t_rgm:7.3f} {d_rgm:9.4g} | "
             if have_occ:
-                v, t, t_occ = occ_mesh(obj, tol)
+                runs = [occ_mesh(obj, tol) for _ in range(3)]     # each times BRepMesh alone, on a new shape
+                v, t, _ = runs[-1]
+                t_occ = min(r[2] for r in runs)
                 d_occ = deviation(obj, v, t)
-                row += (f"{len(t):8d} {t_occ:7.3f} {d_occ:9.4g} | {len(mesh.triangles) / len(t):10.2f} "
-                        f"{t_rgm / t_occ:10.1f}")
+                same = equal_deviation(obj, d_occ)
+                ratio = len(same.triangles) / len(t)
+                worst_tris, worst_time = max(worst_tris, ratio), max(worst_time, t_rgm / t_occ)
+                row += (f"{len(t):8d} {t_occ:7.3f} {d_occ:9.4g} | {t_rgm / t_occ:10.2f} | "
+                        f"{len(same.triangles):19d} {ratio:6.2f}")
             print(row, flush=True)
+    if have_occ:
+        print(f"{'PASS' if worst_tris <= 1 else 'FAIL'}  triangles at equal measured deviation: worst rgm/OCC "
+              f"{worst_tris:.2f} (bar <= 1)")
+        print(f"{'PASS' if worst_time <= 1 else 'FAIL'}  time at equal deflection: worst rgm/OCC {worst_time:.2f} "
+              f"(bar <= 1)")
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cpus")
 
 
 if __name__ == "__main__":
