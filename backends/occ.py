@@ -139,7 +139,7 @@ def surface_geom(surface):
 
 # --- curves → edges and wires --------------------------------------------------------------------
 
-def _edges_of(curve, tol):
+def _edges_of(curve):
     """List of TopoDS_Edge for a 3-D model curve, keeping lines and circles analytic."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
     from OCP.gp import gp_Ax2, gp_Circ
@@ -165,9 +165,9 @@ def _edges_of(curve, tol):
         circ = gp_Circ(gp_Ax2(_pnt(curve.center), _dir(curve.normal), _dir(x)), curve.radius)
         return [BRepBuilderAPI_MakeEdge(circ, 0.0, curve.sweep).Edge()]
     if isinstance(curve, CompositeCurve):
-        return [e for piece in curve.pieces for e in _edges_of(piece, tol)]
+        return [e for piece in curve.pieces for e in _edges_of(piece)]
     if isinstance(curve, IntersectionCurve):
-        return [BRepBuilderAPI_MakeEdge(c3).Edge() for c3, _, _ in _occ_intersection(curve, tol)]
+        return [BRepBuilderAPI_MakeEdge(c3).Edge() for c3, _, _ in _occ_intersection(curve)]
     return [BRepBuilderAPI_MakeEdge(geom_curve(curve.nurbs())).Edge()]
 
 
@@ -184,11 +184,13 @@ def _wire(edges):
 
 # --- intersections by OpenCASCADE ------------------------------------------------------------------
 
-def _occ_intersection(curve, tol):
-    """Branches of ``curve.a ∩ curve.b`` by ``GeomInt_IntSS``: list of (3-D curve, pcurve on a, on b)."""
+def _occ_intersection(curve):
+    """Branches of ``curve.a ∩ curve.b`` by ``GeomInt_IntSS`` at the file precision (PRECISION, not the
+    model's tolerance: the lazy intersection is approximated here, as finely as the file can hold):
+    list of (3-D curve, pcurve on a, on b)."""
     from OCP.GeomInt import GeomInt_IntSS
 
-    inter = GeomInt_IntSS(surface_geom(curve.a), surface_geom(curve.b), tol, True, True, True)
+    inter = GeomInt_IntSS(surface_geom(curve.a), surface_geom(curve.b), PRECISION, True, True, True)
     if not inter.IsDone() or inter.NbLines() == 0:
         raise BackendError(f"OpenCASCADE found no intersection for {_label(curve)}")
     return [(inter.Line(i), inter.LineOnS1(i), inter.LineOnS2(i)) for i in range(1, inter.NbLines() + 1)]
@@ -258,7 +260,7 @@ def _pcurve_pieces(loop, surface, tol):
                                c.weights if c.is_rational else None)
             pieces += [(g, t0, t1, None) for g, t0, t1 in _geom2d_pieces(BSplineCurve(image))]
         else:  # each smooth 3-D edge (line, arc, spline) projected onto the surface
-            for edge in _edges_of(piece, tol):
+            for edge in _edges_of(piece):
                 c3, t0, t1 = BRep_Tool.Curve_s(edge, 0.0, 1.0), BRep_Tool.Parameter_s(
                     TopExp.FirstVertex_s(edge), edge), BRep_Tool.Parameter_s(TopExp.LastVertex_s(edge), edge)
                 c2 = GeomProjLib.Curve2d_s(c3, t0, t1, surface_geom(surface), tol)
@@ -271,7 +273,7 @@ def _pcurve_pieces(loop, surface, tol):
         side = 1 if inter.a is surface else 2 if inter.b is surface else 0
         if side == 0:
             raise BackendError(f"{_label(inter)} is not an intersection with this face's surface")
-        branches = [b[side] for b in _occ_intersection(inter, tol)]
+        branches = [b[side] for b in _occ_intersection(inter)]
         if len(pieces) == 1:  # the whole loop is one closed branch
             closed = [b for b in branches if b.Value(b.FirstParameter()).Distance(b.Value(b.LastParameter())) < 1e-6]
             if len(closed) != 1:
@@ -350,7 +352,7 @@ def _revolution(rev, tol):
     from OCP.gp import gp_Ax1, gp_Trsf
 
     axis = gp_Ax1(_pnt(rev.axis_point), _dir(rev.axis_dir))
-    profile = _wire(_edges_of(rev.profile, tol))
+    profile = _wire(_edges_of(rev.profile))
     if rev.start != 0.0:
         rot = gp_Trsf()
         rot.SetRotation(axis, rev.start)
@@ -424,7 +426,7 @@ def to_shape(obj, tol: float | None = None):
     elif isinstance(obj, Shell):
         shape = _sew([to_shape(f, tol) for f in obj.faces], tol)
     elif isinstance(obj, Curve):
-        edges = _edges_of(obj, tol)
+        edges = _edges_of(obj)
         shape = edges[0] if len(edges) == 1 else _wire(edges)
     else:
         raise BackendError(f"{_label(obj)} ({type(obj).__name__}) has no OpenCASCADE shape")
@@ -531,7 +533,7 @@ def write_step(model, path, *, schema: str = "AP214", verify: bool = False, tol:
     try:
         _write_step_file(pairs, tmp, schema, UNITS[model.units])
         if verify:
-            verify_step(model, tmp, tol=tol)
+            verify_step(model, tmp, tol=tol, expected=[shape for _, shape in pairs])
         os.replace(tmp, path)
     finally:
         if tmp.exists():
@@ -557,12 +559,17 @@ def write_brep(model, path, **ignored):
     return Path(path)
 
 
-def read_step(path):
-    """Read a STEP file: its shape (all roots transferred); BackendError if it cannot be read."""
+def read_step(path, units: str = "mm"):
+    """Read a STEP file: its shape (all roots transferred) in `units` (the file's own unit is converted);
+    BackendError if it cannot be read."""
     from OCP.IFSelect import IFSelect_RetDone
+    from OCP.Interface import Interface_Static
     from OCP.STEPControl import STEPControl_Reader
 
     _quiet()
+    if units not in UNITS:
+        raise BackendError(f"units {units!r} are not known to the STEP reader")
+    Interface_Static.SetCVal_s("xstep.cascade.unit", UNITS[units])
     reader = STEPControl_Reader()
     if reader.ReadFile(str(path)) != IFSelect_RetDone:
         raise BackendError(f"OpenCASCADE cannot read the STEP file {path}")
@@ -635,15 +642,23 @@ def is_valid(shape) -> bool:
     return bool(BRepCheck_Analyzer(shape).IsValid())
 
 
-def verify_step(model, path, *, tol: float | None = None, samples: int = 60) -> float:
-    """Read `path` back and check it: valid by ``BRepCheck_Analyzer`` and every exported face's points
-    (rgm's own evaluation, `samples` per face from a coarse mesh) within `tol` (default: 1e-7 x model
-    size, at least 1e-9) of the read-back shape. Returns the measured max deviation (model units)."""
+def verify_step(model, path, *, tol: float | None = None, samples: int = 60, expected=None) -> float:
+    """Read `path` back and check it: valid by ``BRepCheck_Analyzer``; with `expected` (the shapes that
+    were written) the same number of faces with the same surface types; and every exported face's
+    points (rgm's own evaluation, `samples` per face from a coarse mesh) within `tol` (default: 1e-7 x
+    model size, at least 1e-9) of the read-back shape. Returns the measured max deviation (model units)."""
+    from collections import Counter
+
     from rgm.backends.mesh import face_samples
 
-    shape = read_step(path)
+    shape = read_step(path, model.units)
     if shape is None or shape.IsNull() or not is_valid(shape):
         raise BackendError(f"{path}: the STEP file read back is not a valid shape (BRepCheck_Analyzer)")
+    if expected is not None:
+        written = Counter(surface_type(f) for s in expected for f in faces_of(s))
+        read = Counter(surface_type(f) for f in faces_of(shape))
+        if written != read:
+            raise BackendError(f"{path}: the STEP file read back has faces {dict(read)}, the model {dict(written)}")
     pts, size = face_samples(model.exported(), samples)
     limit = max(1e-7 * size, 1e-9) if tol is None else float(tol)
     worst = float(distances_to_shape(pts, shape).max()) if len(pts) else 0.0

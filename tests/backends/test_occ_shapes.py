@@ -105,7 +105,7 @@ def test_trimmed_face_with_hole_and_3d_edges():
         exp.Next()
 
 
-def test_trimmed_plane_and_intersection_trim():
+def test_trimmed_plane_has_its_area():
     plane = Plane([0, 0, 0], [0, 0, 1], [1, 0, 0])
     square = TrimmedFace(plane, Loop((Polyline([[0, 0, 0], [4, 0, 0], [4, 3, 0], [0, 3, 0], [0, 0, 0]]),)))
     from OCP.BRepGProp import BRepGProp
@@ -114,6 +114,50 @@ def test_trimmed_plane_and_intersection_trim():
     props = GProp_GProps()
     BRepGProp.SurfaceProperties_s(occ.to_shape(square), props)
     assert props.Mass() == pytest.approx(12.0, rel=1e-12)
+
+
+def test_intersection_trim_is_cut_by_opencascade_on_the_plane():
+    """A bump surface with x = 50 u exactly (control x at the Greville abscissae), trimmed by a loop whose
+    one side is the lazy intersection with the plane x = 25: OpenCASCADE's own intersector computes that
+    side (no computation by rgm), its edge lies on the plane to the file precision, and the face has the
+    area of the half surface u <= 0.5."""
+    from OCP.BRep import BRep_Tool
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace
+    from OCP.BRepGProp import BRepGProp
+    from OCP.GProp import GProp_GProps
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+    from OCP.TopoDS import TopoDS
+
+    from rgm.model import IntersectionCurve
+
+    n, p = 8, 3
+    k = np.concatenate([np.zeros(p + 1), np.arange(1, n - p) / (n - p), np.ones(p + 1)])
+    greville = np.array([k[i + 1:i + p + 1].mean() for i in range(n)])
+    x, y = np.meshgrid(50 * greville, 50 * greville, indexing="ij")
+    skin = BSplineSurface(NurbsSurface(p, p, k, k, np.stack([x, y, 6 * np.sin(x / 9) * np.cos(y / 13)], axis=-1)))
+    cut = IntersectionCurve(skin, Plane([25, 0, 0], [1, 0, 0]), 0.01)
+    loop = Loop((Line([0, 0], [0.5, 0]), cut, Line([0.5, 1], [0, 1]), Line([0, 1], [0, 0])))
+    shape = occ.to_shape(TrimmedFace(skin, loop))
+    assert cut.computed == ()                      # rgm's marcher never ran: OpenCASCADE cut it
+
+    def area(s):   # adaptive integration to 1e-10 (the default Gauss rule is only good to ~1e-6)
+        props = GProp_GProps()
+        BRepGProp.SurfaceProperties_s(s, props, 1e-10)
+        return props.Mass()
+
+    half = BRepBuilderAPI_MakeFace(occ.surface_geom(skin), 0.0, 0.5, 0.0, 1.0, occ.PRECISION).Face()
+    assert area(shape) == pytest.approx(area(half), rel=1e-7)
+    on_plane = 0
+    exp = TopExp_Explorer(shape, TopAbs_EDGE)
+    while exp.More():
+        edge = TopoDS.Edge_s(exp.Current())
+        curve, (t0, t1) = BRep_Tool.Curve_s(edge, 0.0, 1.0), BRep_Tool.Range_s(edge)
+        xs = np.array([curve.Value(t).X() for t in np.linspace(t0, t1, 50)])
+        if np.ptp(xs) < 1e-6:
+            on_plane += np.abs(xs - 25).max() <= 1e-6
+        exp.Next()
+    assert on_plane >= 1
 
 
 def test_shell_of_six_patches_is_sewn_into_a_unit_cube():

@@ -32,7 +32,7 @@ def surface(seed, n=6, rational=True):
 def check_roundtrip(model, path, **kw):
     """Write, read back, compare with the shapes rgm lowered and with rgm's own evaluation."""
     occ.write_step(model, path, verify=True, **kw)
-    back = occ.read_step(path)
+    back = occ.read_step(path, model.units)
     assert occ.is_valid(back)
     ours = [f for _, s in occ.named_shapes(model) for f in occ.faces_of(s)]
     theirs = occ.faces_of(back)
@@ -67,9 +67,19 @@ def test_other_schemas(tmp_path, schema, marker):
     assert marker in text
 
 
-def test_inch_model_is_written_in_inches(tmp_path):
-    text = check_roundtrip(pin_model("in"), tmp_path / "pin_in.step")
-    assert "'INCH'" in text
+@pytest.mark.parametrize("units, marker, mm", [("in", "'INCH'", 25.4), ("cm", "SI_UNIT(.CENTI.,.METRE.)", 10.0),
+                                                ("m", "SI_UNIT($,.METRE.)", 1000.0)])
+def test_model_units_are_the_file_units(tmp_path, units, marker, mm):
+    """A model in inches, centimetres or metres is written in that unit; read back in millimetres, the
+    pin's length (129.88 model units) is scaled by the unit's size in mm."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    text = check_roundtrip(pin_model(units), tmp_path / f"pin_{units}.step")
+    assert marker in text
+    box = Bnd_Box()
+    BRepBndLib.Add_s(occ.read_step(tmp_path / f"pin_{units}.step", "mm"), box)
+    assert box.CornerMax().Y() - box.CornerMin().Y() == pytest.approx(129.88 * mm, rel=1e-6)
 
 
 @settings(max_examples=25, deadline=None, database=None)
@@ -115,6 +125,50 @@ def test_verify_refuses_a_wrong_file_and_keeps_nothing(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_verify_refuses_an_invalid_or_incomplete_read_back(tmp_path, monkeypatch):
+    """A reader that gets an invalid shape (a face whose wire is far off its surface) or loses a face is
+    caught by --verify, and no output file is left."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeFace, BRepBuilderAPI_MakePolygon
+    from OCP.gp import gp_Pnt
+
+    square = BRepBuilderAPI_MakePolygon(gp_Pnt(0, 0, 5), gp_Pnt(1, 0, 5), gp_Pnt(1, 1, 5), gp_Pnt(0, 1, 5), True)
+    invalid = BRepBuilderAPI_MakeFace(occ.surface_geom(BSplineSurface(surface(1))), square.Wire()).Face()
+    assert not occ.is_valid(invalid)
+    for back, message in ((invalid, "not a valid shape"), (None, "faces")):
+        real = occ.read_step
+
+        def fake(path, units="mm", back=back, real=real):
+            shape = real(path, units)
+            return back if back is not None else occ.faces_of(shape)[0]
+
+        monkeypatch.setattr(occ, "read_step", fake)
+        with pytest.raises(BackendError, match=message):
+            occ.write_step(pin_model(), tmp_path / "pin.step", verify=True)
+        monkeypatch.undo()
+        assert list(tmp_path.iterdir()) == []
+
+
+def test_each_edge_has_one_pcurve_per_face_in_the_file(tmp_path):
+    """No missing and no doubled pcurves: the file holds one PCURVE per (edge, face) use (a seam edge is
+    used twice by its face), for a trimmed face with a hole and for the pin's revolution faces."""
+    from OCP.TopAbs import TopAbs_EDGE
+    from OCP.TopExp import TopExp_Explorer
+
+    outer = Loop((Polyline([[0.1, 0.1], [0.9, 0.1], [0.9, 0.9], [0.1, 0.9], [0.1, 0.1]]),))
+    hole = Loop((Circle([0.5, 0.5], [0, 0, -1], 0.2),))
+    for name, obj in (("skin", TrimmedFace(BSplineSurface(surface(3)), outer, (hole,), name="skin")),
+                      ("pin", Revolution(Polyline(PIN), [0, 0, 0], [0, 1, 0], name="pin"))):
+        model = Model("mm", 0.01, {name: obj}, (name,))
+        text = check_roundtrip(model, tmp_path / f"{name}.step")
+        uses = 0
+        for face in occ.faces_of(occ.read_step(tmp_path / f"{name}.step")):
+            exp = TopExp_Explorer(face, TopAbs_EDGE)
+            while exp.More():
+                uses += 1
+                exp.Next()
+        assert text.count("PCURVE(") == uses
+
+
 def test_fitted_surface_file_is_compact_and_tolerances_are_not_bloated(tmp_path):
     """A 30 x 30 fitted-style net: the file stays within ~250 bytes per control point, edge and vertex
     tolerances stay at the written precision, and each edge carries one pcurve per face."""
@@ -133,7 +187,7 @@ def test_fitted_surface_file_is_compact_and_tolerances_are_not_bloated(tmp_path)
     path = tmp_path / "fit.step"
     check_roundtrip(model, path)
     assert path.stat().st_size < 250 * 30 * 30
-    back = occ.read_step(path)
+    back = occ.read_step(path, "mm")
     face = occ.faces_of(back)[0]
     for kind, tolerance in ((TopAbs_EDGE, lambda s: BRep_Tool.Tolerance_s(TopoDS.Edge_s(s))),
                             (TopAbs_VERTEX, lambda s: BRep_Tool.Tolerance_s(TopoDS.Vertex_s(s)))):
