@@ -42,7 +42,7 @@ from .iges_format import (
     PHYSICAL, UNIT_FLAGS, USE_DEFINITION, USE_PARAMETRIC, Entity, GlobalSection, IgesFile, iges_date,
 )
 
-__all__ = ["write_iges", "iges_text", "PCURVE_PREFERENCES"]
+__all__ = ["write_iges", "iges_text", "iges_file", "PCURVE_PREFERENCES"]
 
 #: `pcurve_preference` option -> 142 PREF value (None: decided per loop, see `_loop`)
 PCURVE_PREFERENCES = {"auto": None, "2d": 1, "3d": 2, "both": 3}
@@ -374,10 +374,16 @@ def _global(model, file_name: str, tol: float, extent: float, author: str, organ
                          organization=organization, max_line_weight=float(tol))
 
 
-def iges_text(model, *, file_name: str = "model.igs", nurbs_only: bool = False, trim_entity: str = "144",
+def iges_text(model, **options) -> str:
+    """The IGES 5.3 text of `model`'s exported objects (see the module docstring for the mapping;
+    options as for `iges_file`)."""
+    return iges_file(model, **options).to_text()
+
+
+def iges_file(model, *, file_name: str = "model.igs", nurbs_only: bool = False, trim_entity: str = "144",
               pcurve_preference: str = "auto", tol: float | None = None, color=None, author: str = "",
-              organization: str = "") -> str:
-    """The IGES 5.3 text of `model`'s exported objects (see the module docstring for the mapping)."""
+              organization: str = "") -> IgesFile:
+    """The `IgesFile` of `model`'s exported objects, ready for `to_text()` / `to_bytes()`."""
     if str(trim_entity) != "144":
         raise BackendError(f"trim entity {trim_entity!r} is not supported; rgm writes trimmed faces as 144 "
                            f"(the 186 manifold solid B-rep is not implemented)")
@@ -391,7 +397,7 @@ def iges_text(model, *, file_name: str = "model.igs", nurbs_only: bool = False, 
         lowering.root(obj)
     iges.global_section = _global(model, file_name, tol, lowering.extent, author, organization)
     iges.start = f"rgm IGES 5.3 of {Path(model.source).name if model.source else file_name}"
-    return iges.to_text()
+    return iges
 
 
 def write_iges(model, path, *, verify: bool = False, nurbs_only: bool = False, trim_entity: str = "144",
@@ -405,8 +411,8 @@ def write_iges(model, path, *, verify: bool = False, nurbs_only: bool = False, t
     from rgm.atomic import temp_path_beside, write_atomic
 
     path = Path(path)
-    text = iges_text(model, file_name=path.name, nurbs_only=nurbs_only, trim_entity=trim_entity,
-                     pcurve_preference=pcurve_preference, tol=tol, color=color)
+    text = iges_file(model, file_name=path.name, nurbs_only=nurbs_only, trim_entity=trim_entity,
+                     pcurve_preference=pcurve_preference, tol=tol, color=color).to_bytes()
     if not verify:
         return write_atomic(path, text)
     from .iges_verify import verify_iges

@@ -4,8 +4,9 @@
 parameter tokens of every entity, by DE number. Tolerant of what real writers do (CR/LF endings,
 blank lines, D exponents, defaulted Global delimiters, blanks inside fields, comments after the
 record delimiter); a malformed record raises IgesFormatError naming it (`D 17 (line 23)`, `P 5`).
-Records without Hollerith strings are split by the C string methods, and long runs of reals are
-converted in one call (orjson when installed), so 250 000 control points read in about a second.
+A file of 80-column records is viewed as one uint8 array (no per-line work), each entity's
+parameter text is one slice of the P data, records without Hollerith strings are split by the C
+string methods, and runs of reals are converted by `float` once per distinct text.
 """
 from __future__ import annotations
 
@@ -14,11 +15,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .iges_format import GlobalSection, IgesFormatError, _orjson
+from .iges_format import GlobalSection, IgesFormatError
 
 __all__ = ["DirectoryEntry", "IgesData", "Hollerith", "parse_iges"]
-
-_POINT_EXP = re.compile(r"\.(?![0-9])")
 
 
 class Hollerith(str):
@@ -101,21 +100,15 @@ class IgesData:
             raise IgesFormatError(f"{self.entries[de].where()}: expected {first + count - 1} parameters, "
                                   f"the record has {len(toks) - 1}")
         chunk = toks[first:first + count]
-        if _orjson is not None and count >= 64:
-            text = _POINT_EXP.sub(".0", ",".join(chunk))   # JSON wants a digit after the point
-            if "D" in text or "d" in text:
-                text = text.replace("D", "E").replace("d", "e")
-            try:
-                return _finite(np.array(_orjson.loads("[" + text + "]"), dtype=np.float64), self.entries[de])
-            except (ValueError, TypeError):
-                pass  # not JSON-shaped numbers (".5", "+1.", ...): the general path below
+        distinct = dict.fromkeys(chunk)  # each distinct text converted once: nets repeat weights, grid values
         try:
-            return _finite(np.fromiter(map(float, chunk), dtype=np.float64, count=count), self.entries[de])
-        except ValueError:
+            value = dict(zip(distinct, map(float, distinct)))
+        except ValueError:  # D exponents, blanks inside the number, or not a number at all
             try:
-                return np.array([_to_real(t) for t in chunk], dtype=np.float64)
+                value = {t: _to_real(t) for t in distinct}
             except ValueError as exc:
                 raise IgesFormatError(f"{self.entries[de].where()}: {exc}") from None
+        return _finite(np.fromiter(map(value.__getitem__, chunk), dtype=np.float64, count=count), self.entries[de])
 
     def string(self, de: int, index: int) -> str:
         toks = self.params[de]
@@ -240,6 +233,32 @@ def _de_int(text: str, record: str, what: str) -> int:
 
 _DE_FIELDS1 = ("type", "pd_pointer", "structure", "line_font", "level", "view", "transform", "label_display")
 _DE_FIELDS2 = ("type2", "line_weight", "color", "pd_count", "form")
+_LETTERS = np.frombuffer(b"SGDPT", dtype=np.uint8)
+
+
+def _rows(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """(the non-blank records as rows (n, 80) of latin-1 bytes, cut or blank-padded to 80 columns;
+    their line numbers (n,)). A file of 80-column records ended by '\\n' with valid section letters
+    (rgm's, OpenCASCADE's) is viewed as an array as it is; anything else is split into lines, and
+    the first bad record raises IgesFormatError naming its line."""
+    raw = text.encode("latin-1", "replace")
+    n = len(raw) // 81
+    if n and len(raw) == 81 * n and raw.count(b"\n") == n:
+        rows = np.frombuffer(raw, dtype=np.uint8).reshape(n, 81)
+        if (rows[:, 80] == ord("\n")).all() and np.isin(rows[:, 72], _LETTERS).all():
+            return rows[:, :80], np.arange(1, n + 1)
+    numbered = [(k, line) for k, line in enumerate(raw.splitlines(), 1) if line.strip()]
+    for lineno, line in numbered:
+        letter = line[72:73]
+        if len(line) < 73:
+            raise IgesFormatError(f"line {lineno}: record is {len(line)} columns long; IGES records have "
+                                  f"80 (section letter in column 73)")
+        if letter == b"C":
+            raise IgesFormatError(f"line {lineno}: compressed IGES is not supported")
+        if letter not in b"SGDPT":
+            raise IgesFormatError(f"line {lineno}: unknown section letter `{letter.decode('latin-1')}` in column 73")
+    rows = np.frombuffer(b"".join(line[:80].ljust(80) for _k, line in numbered), dtype=np.uint8)
+    return rows.reshape(-1, 80), np.array([k for k, _line in numbered], dtype=np.int64)
 
 
 def parse_iges(text: str) -> IgesData:
@@ -249,31 +268,20 @@ def parse_iges(text: str) -> IgesData:
     defaulted Global delimiters, comments after the record delimiter); a malformed record raises
     IgesFormatError naming it (`D 17` is the 17th Directory record).
     """
-    lines = text.splitlines()
-    letters = [line[72:73] for line in lines]
-    if not set(letters) <= set("SGDPT"):  # also blank lines (letter "")  # find the first bad record for the message
-        for lineno, (line, letter) in enumerate(zip(lines, letters), 1):
-            if not line.strip() or letter in ("S", "G", "D", "P", "T"):
-                continue
-            if len(line) < 73:
-                raise IgesFormatError(f"line {lineno}: record is {len(line)} columns long; IGES records have "
-                                      f"80 (section letter in column 73)")
-            if letter == "C":
-                raise IgesFormatError(f"line {lineno}: compressed IGES is not supported")
-            raise IgesFormatError(f"line {lineno}: unknown section letter `{letter}` in column 73")
-    sections: dict[str, list[tuple[int, str]]] = {k: [] for k in "SGDT"}
-    p_rows = []
-    for lineno, (line, letter) in enumerate(zip(lines, letters), 1):
-        if letter == "P":
-            p_rows.append(line[:64])
-        elif letter:  # (blank lines have none)
-            sections[letter].append((lineno, line.ljust(80)))
-    if not sections["D"] and not sections["G"]:
+    rows, linenos = _rows(text)
+    letters = rows[:, 72]
+
+    def section(letter: str, columns: int) -> str:
+        return rows[letters == ord(letter), :columns].tobytes().decode("latin-1")
+
+    stext, gtext, dtext, pdata = section("S", 72), section("G", 72), section("D", 80), section("P", 64)
+    d_lines = linenos[letters == ord("D")].tolist()
+    if not dtext and not gtext:
         raise IgesFormatError("not an IGES file: no Global or Directory Entry records")
-    start = "\n".join(l[:72].rstrip() for _n, l in sections["S"])
-    gtext = "".join(l[:72] for _n, l in sections["G"]).rstrip()
-    g = _parse_global(gtext, f"G 1-{len(sections['G'])}")
-    d = sections["D"]
+    start = "\n".join(stext[i:i + 72].rstrip() for i in range(0, len(stext), 72))
+    g = _parse_global(gtext.rstrip(), f"G 1-{len(gtext) // 72}")
+    d = [(n, dtext[80 * k:80 * k + 80]) for k, n in enumerate(d_lines)]
+    p_count = len(pdata) // 64
     if len(d) % 2:
         raise IgesFormatError(f"D {len(d)} (line {d[-1][0]}): the Directory Entry section has an odd number of "
                               f"records; every entity takes two")
@@ -300,10 +308,10 @@ def parse_iges(text: str) -> IgesData:
             params[de] = ["0"]
             continue
         first, count = entry.pd_pointer, max(entry.pd_count, 1)
-        if first < 1 or first + count - 1 > len(p_rows):
+        if first < 1 or first + count - 1 > p_count:
             raise IgesFormatError(f"{rec}: parameter pointer {first} (+{count} records) lies outside the "
-                                  f"P section of {len(p_rows)} records")
-        body = "".join(p_rows[first - 1:first - 1 + count])
+                                  f"P section of {p_count} records")
+        body = pdata[64 * (first - 1):64 * (first - 1 + count)]
         toks = _split_params(body, g.param_delimiter, g.record_delimiter, lambda: f"P {first} ({entry.where()})")
         if not toks or _de_int(toks[0], f"P {first}", "entity type") != entry.type:
             raise IgesFormatError(f"P {first} ({entry.where()}): the parameter record starts with "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import re
+import struct
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ from hypothesis import strategies as st
 
 from rgm.backends.iges_format import Entity, GlobalSection, IgesFile, IgesFormatError, format_reals, hollerith
 from rgm.backends.iges_parse import parse_iges
+from rgm.backends.iges_records import record_bounds
 from rgm.errors import BackendError
 
 FORTRAN_REAL = re.compile(r"^-?[0-9]+\.[0-9]*(E[+-][0-9]+)?$")
@@ -122,21 +124,66 @@ def test_not_iges_is_a_clear_error():
         parse_iges("hello\nworld\n")
 
 
-@settings(max_examples=60, deadline=None)
-@given(st.lists(st.floats(allow_nan=False, allow_infinity=False), min_size=64, max_size=300),
-       st.sampled_from([1.0, 1e-5, 1e-6, 1e-7, 1e15, 1e16]))
-def test_accelerated_formatting_gives_the_same_text_as_repr(values, scale):
-    """With orjson installed the reals are formatted by it (Ryu); the file must not depend on that."""
-    import rgm.backends.iges_format as F
+def _reference_real(v: float) -> str:
+    """The spelling rule, one value at a time: repr, upper-case exponent, a point before it."""
+    return re.sub(r"^(-?[0-9]+)E", r"\1.E", repr(v).replace("e", "E"))
 
-    if F._orjson is None:
-        pytest.skip("orjson not installed: only the repr path exists")
-    with np.errstate(over="ignore"):
-        arr = np.array(values) * scale
-    arr = arr[np.isfinite(arr)]
-    fast = F._reals_text(arr, ",")
-    saved, F._orjson = F._orjson, None
-    try:
-        assert fast == F._reals_text(arr, ",")
-    finally:
-        F._orjson = saved
+
+_EDGE_FLOATS = [0.0, -0.0, 5e-324, -5e-324, 2.2250738585072014e-308, 2.225073858507201e-308, 1.7976931348623157e308,
+                -1.7976931348623157e308, 1e16, 9999999999999998.0, 1e-4, 1e-5, 0.0001, 1e22, 1e23, 1.0, -1.0, 3.0]
+_FLOATS = st.one_of(st.floats(allow_nan=False, allow_infinity=False), st.sampled_from(_EDGE_FLOATS),
+                    st.integers(-2**63, 2**63).map(float), st.floats(-1e-300, 1e-300), st.floats(-1e30, 1e30))
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(_FLOATS, min_size=0, max_size=200), st.integers(0, 3))
+def test_bulk_formatting_equals_the_one_value_rule(values, repeat):
+    """`format_reals` formats whole arrays at once, each distinct value once (the bit pattern: -0.0
+    is not 0.0); the result must be exactly the per-value rule, in order, repeats included."""
+    values = values + values[::2] * repeat
+    texts = format_reals(np.array(values, dtype=np.float64))
+    assert texts == [_reference_real(v) for v in values]
+    assert [struct.pack("<d", float(t)) for t in texts] == [struct.pack("<d", v) for v in values]
+
+
+def _reference_records(lists: list[list[str]], width: int) -> list[tuple[int, str]]:
+    """Greedy packing, token by token: whole tokens while they fit; a token longer than a record
+    starts one and is cut into full records, its remainder opening the next."""
+    out = []
+    for owner, tokens in enumerate(lists):
+        current = ""
+        for k, token in enumerate(tokens):
+            token += "\x01" if k == len(tokens) - 1 else "\x00"
+            if len(current) + len(token) <= width:
+                current += token
+                continue
+            if current:
+                out.append((owner, current))
+            pieces = [token[i:i + width] for i in range(0, len(token), width)]
+            out += [(owner, p) for p in pieces[:-1]]
+            current = pieces[-1]
+        out.append((owner, current))
+    return out
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.lists(st.lists(st.text(alphabet="ab", max_size=150), min_size=1, max_size=30), min_size=1, max_size=5),
+       st.sampled_from([8, 64, 72]))
+def test_record_packing_equals_greedy_token_by_token(lists, width):
+    stream = b"\x01".join(b"\x00".join(t.encode() for t in tokens) for tokens in lists) + b"\x01"
+    bounds, owners = record_bounds(stream, width)
+    got = [(int(o), stream[a:b].decode()) for o, a, b in zip(owners, bounds[:-1], bounds[1:])]
+    assert got == _reference_records(lists, width)
+
+
+def test_parser_reads_the_same_data_from_any_line_layout():
+    """The fixed-width fast path (80 columns + LF) and the line-by-line path give the same data."""
+    text = _file([list(np.linspace(0, 1, 40)), [0.0, 1e-5, -0.0, 1, 1, 1]], names=["curve", "line"])
+    lines = text.splitlines()
+    variants = [text.replace("\n", "\r\n"), "\n".join(lines[:3] + [""] + lines[3:]) + "\n",
+                "\n".join(l + "  " for l in lines)]
+    base = parse_iges(text)
+    for variant in variants:
+        data = parse_iges(variant)
+        assert (data.start, data.global_section, data.entries, data.params) == \
+            (base.start, base.global_section, base.entries, base.params)
