@@ -157,12 +157,12 @@ class IgesFile:
         p_stream = token_stream(groups)
         p_bounds, owner = record_bounds(p_stream, 64)
         counts = np.bincount(owner, minlength=len(groups)).tolist()
-        d_lines, pseq = [], 1
+        d_lines, pseq = [], 1                                   # (each entry: the entity's two DE records)
         for e, count in zip(self.entities, counts):
             status = f"{e.blank:02d}{e.subordinate:02d}{e.use:02d}{e.hierarchy:02d}"
+            label = printable(e.label)[:8]
             d_lines.append(f"{e.type:8d}{pseq:8d}{0:8d}{1:8d}{0:8d}{0:8d}{e.transform:8d}{0:8d}{status:>8}"
-                           f"{e.type:8d}{0:8d}{e.color:8d}{count:8d}{e.form:8d}{'':8}{'':8}{printable(e.label)[:8]:>8}"
-                           f"{e.subscript:8d}")
+                           f"{e.type:8d}{0:8d}{e.color:8d}{count:8d}{e.form:8d}{'':8}{'':8}{label:>8}{e.subscript:8d}")
             pseq += count
         d_text = "".join(d_lines).encode("ascii")
         buf, s_rows, g_rows, d_rows, p_rows, t_rows = file_rows(

@@ -6,9 +6,10 @@ per byte:
 
 - `format_reals` / `token_stream`: every real of a section is formatted in one call of Python's
   shortest round-trip `repr` (on a list, so at C speed), once per distinct value (polynomial weights,
-  knots and grid coordinates repeat), and the few spellings a Fortran-style reader rejects are fixed
-  by one regex pass over that text (`1e-05` -> `1.E-05`); the tokens are then gathered into place
-  as fixed-width byte rows. Every real reads back bit-exact.
+  knots and grid coordinates repeat), and the one spelling a Fortran-style reader rejects (an
+  exponent without a decimal point, `1e-05` -> `1.E-05`) is fixed by one vectorised pass over that
+  text; the tokens are then gathered into place as fixed-width byte rows. Every real reads back
+  bit-exact.
 - `record_bounds`: greedy packing of whole tokens into records of at most `width` columns, by one
   `searchsorted` for every possible record start and a walk along the chosen starts; a token
   longer than a record (a long Hollerith string) starts a record and is cut at the record width,
@@ -121,17 +122,19 @@ def token_stream(groups) -> bytes:
     encoded = [_items(values, reals) for values in groups]
     text, offsets = _real_stream(np.concatenate(reals) if reals else np.zeros(0))
     at = offsets[np.cumsum([0] + [r.size for r in reals])].tolist()
-    out, k = [], 0
+    text, pieces, k = memoryview(text), [], 0                    # (views: the stream is copied once, by join)
     for items in encoded:
-        pieces = []
+        start = len(pieces)
         for item in items:
             if item is _REALS:
                 pieces.append(text[at[k]:at[k + 1]])
                 k += 1
             else:
                 pieces.append(item)
-        out.append(b"".join(pieces)[:-1])
-    return b"\x01".join(out) + b"\x01"
+        if len(pieces) > start:
+            pieces[-1] = pieces[-1][:-1]                          # the last token ends the list
+        pieces.append(b"\x01")
+    return b"".join(pieces)
 
 
 def record_bounds(stream: bytes, width: int) -> tuple[np.ndarray, np.ndarray]:
