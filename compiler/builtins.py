@@ -43,7 +43,12 @@ class Signature:
     named_only: bool = False
 
     def param(self, name: str) -> Param | None:
-        return next((p for p in self.params if p.name == name), None)
+        return self.by_name.get(name)
+
+    @cached_property
+    def by_name(self) -> dict[str, Param]:
+        """Parameters by name (computed once: the checker asks for every named argument)."""
+        return {p.name: p for p in self.params}
 
     def __str__(self) -> str:
         if self.named_only:   # an annotation: every field optional, no result

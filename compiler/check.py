@@ -61,8 +61,12 @@ def _literal(num: A.Number, unit: str) -> str:
     return f"{value}{unit}"
 
 
+def _callee(fname: str, annotation: bool) -> str:
+    return f"`@{fname}`" if annotation else f"`{fname}`"
+
+
 def _why(fname: str, pname: str, pos: int | None, annotation: bool = False) -> str:
-    callee = f"`@{fname}`" if annotation else f"`{fname}`"
+    callee = _callee(fname, annotation)
     if pos is not None:
         return f"the {ordinal(pos + 1)} argument of {callee} (`{pname}`)"
     return f"`{pname}` of {callee}"
@@ -291,36 +295,38 @@ class _Checker:
         repeated (E0305) and missing (E0303) arguments. Returns parameter name -> its argument(s)."""
         bound: dict[str, list[Arg]] = {}
         params = sig.params
-        callee = f"`@{fname}`" if annotation else f"`{fname}`"
+        n = len(params)
+        first_variadic = n - 1 if n and params[-1].variadic else n   # positions from here go to `pieces...`
         for i, (expr, t) in enumerate(args):
-            if params and params[min(i, len(params) - 1)].variadic:
+            if i >= first_variadic and first_variadic < n:
                 bound.setdefault(params[-1].name, []).append(Arg(expr, t, i))
-            elif i < len(params):
+            elif i < n:
                 bound[params[i].name] = [Arg(expr, t, i)]
             else:
-                self.diags.append(error("E0302", f"{callee} takes {len(params)} argument{'s' * (len(params) != 1)} "
+                self.diags.append(error("E0302", f"{_callee(fname, annotation)} takes {n} argument{'s' * (n != 1)} "
                                         f"but {len(args)} were given", expr.span, f"unexpected {ordinal(i + 1)} argument",
                                         notes))
+        by_name = sig.by_name
         for key, expr, t in kwargs:
-            param = sig.param(key)
+            param = by_name.get(key)
             if key in bound:
-                self.diags.append(error("E0305", f"`{key}` of {callee} is given twice", expr.span, "given again here",
-                                        notes))
+                self.diags.append(error("E0305", f"`{key}` of {_callee(fname, annotation)} is given twice", expr.span,
+                                        "given again here", notes))
             elif param is None and sig.extra is None or param is not None and param.variadic:
                 names = [p.name for p in params if not p.variadic]
-                self.diags.append(error("E0304", f"{callee} has no parameter `{key}`", expr.span, f"unknown `{key}:`",
-                                        notes, did_you_mean(key, names)))
+                self.diags.append(error("E0304", f"{_callee(fname, annotation)} has no parameter `{key}`", expr.span,
+                                        f"unknown `{key}:`", notes, did_you_mean(key, names)))
             else:
                 bound[key] = [Arg(expr, t, None)]
         for param in params:
             if param.name in bound:
                 continue
             if param.required:
-                self.diags.append(error("E0303", f"{callee} is missing its argument `{param.name}` ({param.type})",
-                                        span, f"`{param.name}` missing", notes))
+                self.diags.append(error("E0303", f"{_callee(fname, annotation)} is missing its argument "
+                                        f"`{param.name}` ({param.type})", span, f"`{param.name}` missing", notes))
             elif param.variadic:
-                self.diags.append(error("E0303", f"{callee} needs at least one of `{param.name}` ({param.type})",
-                                        span, "nothing given", notes))
+                self.diags.append(error("E0303", f"{_callee(fname, annotation)} needs at least one of "
+                                        f"`{param.name}` ({param.type})", span, "nothing given", notes))
         return bound
 
     def mismatch(self, fname, pname, expected, arg: Arg, notes, annotation=False) -> None:

@@ -1,15 +1,20 @@
-"""A tight driver for lark's LALR(1) tables: the fast path of `rgm.compiler.parser.parse`.
+"""A fast driver for lark's LALR(1) tables: the fast path of `rgm.compiler.parser.parse`.
 
 lark computes the LALR(1) parse table of grammar/rgm.lark; lark's own parse loop, token objects,
-lexer classes and callback wrappers cost about 20 µs per token in CPython. This module runs the
-same table with the same tree-building callbacks (so it builds the same AST) from one loop:
-  * one master regex (`re.finditer` with named groups) replaces the contextual lexer; a NAME that
+lexer classes and callback wrappers cost about 20 µs per token in CPython. This module uses the same
+table and the same tree-building callbacks (so it builds the same AST), at a fraction of the cost:
+  * one regex `findall` (a single C call) splits the text into (blanks, token) pairs; a token's kind
+    is looked up by its spelling, and lines and columns are counted along the way. A NAME that
     spells a keyword (`units`, `param`, ...) becomes the keyword only where the table accepts it,
     which is exactly what lark's contextual lexer does;
-  * a reduction pops the rule's symbols, drops anonymous punctuation, splices `_helper` rules into
-    their parent and passes `?rule` single children through, as lark's ChildFilter/ExpandSingleChild
-    do, then calls the builder method named by the rule's alias or origin.
-It does no error recovery: on the first unexpected character or token it returns None and the
+  * the table is run once per *statement shape*, the sequence of token kinds up to its `;`: the run
+    (`_Shape`) turns the shifts and reductions into one Python expression of builder calls, which is
+    compiled and kept. Every later statement of that shape is built by calling it: no table look-ups,
+    no parse stack. Generated files repeat a few shapes thousands of times.
+A reduction pops the rule's symbols, drops anonymous punctuation, splices `_helper` rules into their
+parent and passes `?rule` single children through, as lark's ChildFilter/ExpandSingleChild do, then
+calls the builder method named by the rule's alias or origin.
+It does no error recovery: on the first unexpected character or token it returns False and the
 caller re-parses with lark's own parser, whose interactive state the recovery needs.
 """
 from __future__ import annotations
@@ -22,9 +27,9 @@ from lark.parsers.lalr_analysis import Shift
 # master regex order: first match wins, so longer/higher-priority forms come first
 _ORDER = ("NET", "COMMENT", "NUMBER", "STRING", "ANNOTATION", "NAME", "DEFINE")
 _BLANK = "[ \t\f\r\n]"
-
-
 _KIND_CACHE = 200_000   # distinct token spellings remembered between parses
+_SHAPE_CACHE = 20_000   # statement shapes remembered between parses
+_COMPILE_AFTER = 2      # a shape is compiled on its 3rd statement (compiling costs about 3 table runs)
 
 
 class Tok:
@@ -53,7 +58,6 @@ class FastLALR:
         table = frontend.parse_table
         self.states = table.states
         self.start_state = table.start_states["start"]
-        self.end_state = table.end_states["start"]
         terms = {t.name: t for t in lark_obj.terminals}
         name_re = re.compile(terms["NAME"].pattern.to_regexp())
         self.keywords = {str(t.pattern.value): str(t.name) for t in terms.values()
@@ -74,133 +78,206 @@ class FastLALR:
         kept = {sym.name for rule in frontend.callbacks for sym in rule.expansion
                 if sym.is_term and not sym.filter_out}
         self.dropped = frozenset(n for n in terms if n not in kept and n not in ("COMMENT", "WS"))
-        reducers = {rule: self._reducer(rule, builder) for rule in frontend.callbacks}
-        # state -> {symbol: shift/goto target (int) | reducer (size, origin, function)}
+        rules = {rule: _Rule(rule) for rule in frontend.callbacks}
+        # state -> {symbol: shift/goto target (int) | the rule to reduce}
         self.actions = [None] * (max(self.states) + 1)
         for state, row in self.states.items():
-            self.actions[state] = {str(sym): (arg if what is Shift else reducers[arg]) for sym, (what, arg) in row.items()}
-
-    @staticmethod
-    def _reducer(rule, builder):
-        """(size, origin name, function of the popped values) for one grammar rule."""
-        size = len(rule.expansion)
-        keep = [i for i, sym in enumerate(rule.expansion) if not (sym.is_term and sym.filter_out)]
-        splice = {i for i in keep if not rule.expansion[i].is_term and rule.expansion[i].name.startswith("_")}
-        name = str(rule.origin.name)
-        method = getattr(builder, str(rule.alias or name), None)
-        grows = bool(keep) and keep[0] in splice and rule.expansion[keep[0]].name == rule.origin.name
-        if grows:
-            # a left-recursive list helper (`_x_star: _x_star "," item`): append to the list built
-            # so far instead of copying it, which would make a list of n items cost n^2
-            first, rest = keep[0], keep[1:]
-
-            def children(values):
-                out = values[first]
-                for i in rest:
-                    if i in splice:
-                        out.extend(values[i])
-                    else:
-                        out.append(values[i])
-                return out
-        elif splice:
-            def children(values):
-                out = []
-                for i in keep:
-                    if i in splice:
-                        out.extend(values[i])
-                    else:
-                        out.append(values[i])
-                return out
-        elif len(keep) == size:
-            children = None                      # every symbol is kept: the popped list as it is
-        else:
-            def children(values):
-                return [values[i] for i in keep]
-        if name.startswith("_"):                 # a helper rule: its children go to the parent
-            return size, name, children or list
-        if rule.options.expand1 and rule.alias is None:
-            if not splice and len(keep) == 1 and size == 1:   # `?rule: child`: no call at all
-                return size, name, None
-            if not splice and len(keep) == 1:    # `?rule` with one kept child: pass it through
-                k = keep[0]
-                return size, name, lambda values: values[k]
-
-            def passthrough(values):
-                c = children(values) if children else values
-                return c[0] if len(c) == 1 else method(c)
-            return size, name, passthrough
-        if children is None:
-            return size, name, method
-        return size, name, lambda values: method(children(values))
+            self.actions[state] = {str(sym): (arg if what is Shift else rules[arg]) for sym, (what, arg) in row.items()}
+        self.methods = {r.method: getattr(builder, r.method) for r in rules.values()
+                        if r.method and hasattr(builder, r.method)}
+        # compiled statements by shape, for the first statement of a file and for the others (the
+        # stack below a statement differs); the stack between statements, once known
+        self.shapes: tuple[dict, dict] = ({}, {})
+        self.between: list[int] | None = None
 
     def parse(self, text: str, on_comment) -> bool:
         """Parse `text`, calling the builder as lark would; False at the first error (nothing is
         undone: the caller discards what was built and re-parses with lark). Lines and columns are
         counted along the way: only blanks and nets can hold a newline."""
-        actions, keywords, end_state, dropped = self.actions, self.keywords, self.end_state, self.dropped
-        kinds, classify = self.kinds, self.classify
+        kinds, classify, keywords, dropped = self.kinds, self.classify, self.keywords, self.dropped
         if len(kinds) > _KIND_CACHE:
             kinds.clear()
-        state_stack = [self.start_state]
-        values: list = []
+        for cache in self.shapes:
+            if len(cache) > _SHAPE_CACHE:
+                cache.clear()
+        shapes = self.shapes[0]
+        toks: list[Tok] = []     # the kept tokens of the statement being read
+        shape: list[str] = []    # the kinds of all its tokens (keyword spellings as themselves)
         pos, line, bol = 0, 1, 0           # offset after the last token, its line, where that line begins
-        pairs = self.splitter.findall(text)
-        pairs.append(("", None))
-        for blank, value in pairs:
-            if value is None:
-                tok, kind = None, "$END"
+        for blank, value in self.splitter.findall(text):
+            start = pos + len(blank)
+            pos = start + len(value)
+            if "\n" in blank:
+                line += blank.count("\n")
+                bol = start - len(blank) + blank.rindex("\n") + 1
+            kind = kinds.get(value)
+            if kind is None:
+                kind = kinds[value] = classify(value).lastgroup
+            if kind in dropped:
+                shape.append(kind)
+                continue
+            if kind == "NET":
+                col, first_line = start - bol + 1, line
+                if "\n" in value:
+                    line += value.count("\n")
+                    bol = start + value.rindex("\n") + 1
+                tok = Tok(kind, value, start, pos, first_line, col, line, pos - bol + 1)
             else:
-                start = pos + len(blank)
-                pos = start + len(value)
-                if "\n" in blank:
-                    line += blank.count("\n")
-                    bol = start - len(blank) + blank.rindex("\n") + 1
-                kind = kinds.get(value)
-                if kind is None:
-                    kind = kinds[value] = classify(value).lastgroup
-                if kind in dropped:
-                    tok = None
-                elif kind == "NAME":
-                    tok = Tok(kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1)
-                    if value in keywords and keywords[value] in actions[state_stack[-1]]:
-                        kind = tok.type = keywords[value]
-                elif kind == "NET":
-                    col = start - bol + 1
-                    if "\n" in value:
-                        end_line = line + value.count("\n")
-                        bol = start + value.rindex("\n") + 1
-                    else:
-                        end_line = line
-                    tok = Tok(kind, value, start, pos, line, col, end_line, pos - bol + 1)
-                    line = end_line
+                tok = Tok(kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1)
+                if kind == "COMMENT":
+                    on_comment(tok)
+                    continue
+                if kind == "_ERROR":
+                    return False
+            toks.append(tok)
+            shape.append(value if kind == "NAME" and value in keywords else kind)
+            if kind == "SEMI":
+                key = tuple(shape)
+                build = shapes.get(key, 0)
+                if type(build) is int:     # built `build` times: run the table, compile once it repeats
+                    first = shapes is self.shapes[0]
+                    if build < _COMPILE_AFTER:
+                        if not self.run(key, first, _Direct(toks, self.methods)):
+                            return False
+                        shapes[key] = build + 1
+                        build = None
+                    else:              # a shape that has built statements: it compiles
+                        build = shapes[key] = self.run(key, first, _Source(self.methods))
+                if build is not None:
+                    build(toks)
+                shapes = self.shapes[1]
+                toks, shape = [], []
+        return not shape                   # text after the last `;` is an unfinished statement
+
+    def run(self, shape: tuple[str, ...], first: bool, out):
+        """Run the table over one statement shape (with `$END` after it), building through `out`
+        (`_Direct`: the statement itself; `_Source`: a function that builds such statements). The run
+        stops before the reduction that would add the statement to the file's list. Returns what
+        `out.done` gives, or False when the shape is not a statement."""
+        actions, keywords, dropped = self.actions, self.keywords, self.dropped
+        states = [self.start_state] if first else list(self.between)
+        depth = len(states)
+        values: list = [None] * depth
+        kept = 0
+        for kind in shape + ("$END",):
+            if kind in keywords:           # a NAME spelling a keyword
+                if keywords[kind] in actions[states[-1]]:
+                    kind = keywords[kind]
+                    out.retype(kept, kind)
                 else:
-                    tok = Tok(kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1)
-                    if kind == "COMMENT":
-                        on_comment(tok)
-                        continue
-                    if kind == "_ERROR":
-                        return False
-            while True:     # reduce while the table says so, then shift
-                action = actions[state_stack[-1]].get(kind)
+                    kind = "NAME"
+            while True:
+                action = actions[states[-1]].get(kind)
                 if action is None:
                     return False
                 if type(action) is int:
-                    state_stack.append(action)
-                    values.append(tok)
+                    states.append(action)
+                    if kind in dropped:
+                        values.append(None)
+                    else:
+                        values.append(out.token(kept))
+                        kept += 1
                     break
-                size, origin, fn = action
-                if fn is None:              # a unit rule passing its child through: change state only
-                    state_stack[-1] = actions[state_stack[-2]][origin]
+                size = action.size
+                if size > len(states) - depth or action.origin == "start":
+                    if first:
+                        self.between = states
+                    return out.done([x for v in values[depth:] for x in (v if isinstance(v, list) else [v])])
+                if action.unit:            # `?rule: child`: the value stays, only the state changes
+                    states[-1] = actions[states[-2]][action.origin]
                     continue
                 if size:
-                    value = fn(values[-size:])
+                    popped = values[-size:]
                     del values[-size:]
-                    del state_stack[-size:]
+                    del states[-size:]
                 else:
-                    value = fn([])
-                goto = actions[state_stack[-1]][origin]
-                state_stack.append(goto)
-                values.append(value)
-                if goto == end_state and kind == "$END":
-                    return True
-        return False
+                    popped = []
+                states.append(actions[states[-1]][action.origin])
+                values.append(action.reduce(popped, out.node))
+
+
+class _Direct:
+    """Builds one statement while the table runs: tokens and builder calls as they come."""
+
+    def __init__(self, toks: list, methods: dict):
+        self.toks, self.methods = toks, methods
+
+    def token(self, k: int):
+        return self.toks[k]
+
+    def retype(self, k: int, kind: str) -> None:
+        self.toks[k].type = kind
+
+    def node(self, method: str, children: list):
+        return self.methods[method](children)
+
+    def done(self, built: list) -> bool:
+        return True
+
+
+class _Source:
+    """Writes what the table does as Python source, `def build(t): ...` over the kept tokens `t`, and
+    compiles it: the builder calls nest as the reductions did, so they run in the same order."""
+
+    def __init__(self, methods: dict):
+        self.methods, self.lines = methods, []
+
+    def token(self, k: int) -> str:
+        return f"t[{k}]"
+
+    def retype(self, k: int, kind: str) -> None:
+        self.lines.append(f"t[{k}].type = {kind!r}")
+
+    def node(self, method: str, children: list) -> str:
+        return f"{method}([{', '.join(children)}])"
+
+    def done(self, built: list):
+        source = "def build(t):\n" + "".join(f"    {line}\n" for line in self.lines + built)
+        namespace = dict(self.methods)
+        exec(compile(source, "<statement>", "exec"), namespace)
+        return namespace["build"]
+
+
+class _Rule:
+    """One grammar rule as the shape compiler reduces it: which popped symbols it keeps (anonymous
+    punctuation is filtered out), which it splices (`_helper` rules: their children go to the parent),
+    whether it is a `?rule` that passes a single child through, and the builder method it calls."""
+
+    def __init__(self, rule):
+        expansion = rule.expansion
+        self.size = len(expansion)
+        self.origin = str(rule.origin.name)
+        self.keep = [i for i, sym in enumerate(expansion) if not (sym.is_term and sym.filter_out)]
+        self.splice = {i for i in self.keep if not expansion[i].is_term and expansion[i].name.startswith("_")}
+        self.helper = self.origin.startswith("_")
+        self.passthrough = bool(rule.options.expand1) and rule.alias is None
+        self.method = None if self.helper else str(rule.alias or self.origin)
+        # a left-recursive list helper (`_x_star: _x_star "," item`) appends to the list built so far
+        # instead of copying it, which would make a list of n items cost n^2
+        self.grows = bool(self.keep) and self.keep[0] in self.splice and expansion[self.keep[0]].name == rule.origin.name
+        self.unit = self.passthrough and self.size == 1 and self.keep == [0] and not self.splice
+        self.whole = not self.splice and len(self.keep) == self.size   # the popped list is the children
+
+    def reduce(self, popped: list, node):
+        """The value of the reduction: the children list of a helper, the single child of a
+        pass-through `?rule`, else `node(method, children)`."""
+        children = popped if self.whole else self._children(popped)
+        if self.helper:
+            return children
+        if self.passthrough and len(children) == 1:
+            return children[0]
+        return node(self.method, children)
+
+    def _children(self, popped: list) -> list:
+        """The kept symbols, helpers' lists spliced in."""
+        keep = self.keep
+        if self.grows:
+            children, keep = popped[keep[0]], keep[1:]
+        else:
+            children = []
+        for i in keep:
+            if i in self.splice:
+                children.extend(popped[i])
+            else:
+                children.append(popped[i])
+        return children

@@ -24,8 +24,8 @@ units, E0009 too many syntax errors (parsing stopped).
 """
 from __future__ import annotations
 
+import functools
 import gc
-import math
 import re
 import threading
 from dataclasses import fields, replace
@@ -53,6 +53,7 @@ _OPERATORS = {"PLUS", "MINUS", "STAR", "SLASH"}
 _EXPR_START = {"NAME", "NUMBER", "STRING", "LSQB", "LPAR", "NET", "MINUS"}
 _STMT_START = {"UNITS", "TOLERANCE", "PARAM", "FN", "EXPORT", "ANNOTATION"}
 _UNIT_SUFFIXES = ("mm", "cm", "deg", "rad", "in", "m")
+_INF = float("inf")       # a NUMBER token has no sign: the only non-finite value it reads as
 # skips strings, comments and nets while looking for the `;` that ends a broken statement
 _SYNC = re.compile(r'"(?:[^"\\\n]|\\.)*"?|#[^\n]*|net\s+[0-9]+(?:\s*x\s*[0-9]+)?\s*\[[^\]]*\]|;')
 _NEWLINE_GAP = re.compile(r"\n[ \t\f\r]*\n")
@@ -85,23 +86,36 @@ def parse(text: str | bytes, filename: str = "<input>", *, fast: bool = True
 
 # ------------------------------------------------------------------------------------------------ AST
 
-_FIELDS = {cls: tuple(f.name for f in fields(cls)) for cls in
-           (Span, A.Number, A.String, A.Name, A.Call, A.ListExpr, A.BinOp, A.Neg, A.Member)}
-_object_new = object.__new__
+def _maker(cls):
+    """A constructor for the frozen dataclass `cls` taking every field in order: the field dict is
+    written in one step, without the per-field `object.__setattr__` of the generated __init__ (twice
+    as fast; spans and nodes are most of the objects a parse creates). The result is the same
+    object: same fields, equality and hash."""
+    names = [f.name for f in fields(cls)]
+    assert not any(n.endswith("_") for n in names)
+    source = (f"def make({', '.join(names)}):\n    made_ = new_(cls_)\n"   # no field ends with `_`
+              f"    made_.__dict__.update({{{', '.join(f'{n!r}: {n}' for n in names)}}})\n    return made_\n")
+    namespace = {"new_": object.__new__, "cls_": cls}
+    exec(source, namespace)
+    return namespace["make"]
 
 
-def _make(cls, *values):
-    """`cls(*values)` for a frozen dataclass, every field given in order, without the per-field
-    `object.__setattr__` of the generated __init__ (twice as fast; spans and atoms are most of the
-    objects a parse creates). The result is the same object: same fields, equality and hash."""
-    obj = _object_new(cls)
-    obj.__dict__.update(zip(_FIELDS[cls], values))
-    return obj
+_SPAN, _NUMBER, _STRING, _NAME, _CALL, _LIST, _BINOP, _NEG, _MEMBER, _NET = map(_maker, (
+    Span, A.Number, A.String, A.Name, A.Call, A.ListExpr, A.BinOp, A.Neg, A.Member, A.Net))
+_TYPEREF, _PARAM, _ANNOTATION, _UNITS, _TOLERANCE, _BINDING, _FNDEF, _EXPORT = map(_maker, (
+    A.TypeRef, A.Param, A.Annotation, A.Units, A.Tolerance, A.Binding, A.FnDef, A.Export))
+
+
+@functools.cache
+def _netbody():
+    from . import netbody   # numpy is loaded only when a file has a net
+    return netbody
 
 
 class _Builder(Transformer):
     """Lark callbacks: children (named tokens and already-built nodes) -> AST nodes with spans.
-    One instance serves every parse (under _LOCK); `run` is the parse in progress."""
+    One instance serves every parse (under _LOCK); `run` is the parse in progress. Tokens are Tok
+    (the fast driver) or lark Tokens (lark's loop), converted where their position is read."""
 
     run: "_Run"
 
@@ -111,46 +125,49 @@ class _Builder(Transformer):
 
     # -- spans
     def _span(self, first, last) -> Span:
+        """From the start of `first` to the end of `last`, each a token or a node."""
         a = first if first.__class__ is Tok else _position(first)
         b = last if last.__class__ is Tok else _position(last)
-        span = _object_new(Span)    # as _make(Span, ...), with the field dict written out (the hottest path)
-        span.__dict__.update({"file": self.run.filename, "line": a.line, "col": a.col, "end_line": b.end_line,
-                              "end_col": b.end_col, "start_pos": a.start_pos, "end_pos": b.end_pos})
-        return span
+        return _SPAN(self.run.filename, a.line, a.col, b.end_line, b.end_col, a.start_pos, b.end_pos)
+
+    def _token_span(self, tok) -> Span:
+        if tok.__class__ is not Tok:
+            tok = Tok.from_lark(tok)
+        return _SPAN(self.run.filename, tok.line, tok.col, tok.end_line, tok.end_col, tok.start_pos, tok.end_pos)
 
     # -- expressions
     def number(self, c):
         return self._number(c[0])
 
-    def _number(self, tok: Token) -> A.Number:
+    def _number(self, tok) -> A.Number:
         text, unit = tok.value, None
-        if text[-1].isalpha():
+        if text[-1] > "9":                 # a letter: a unit suffix
             for suffix in _UNIT_SUFFIXES:
                 if text.endswith(suffix):
                     text, unit = text[: -len(suffix)], suffix
                     break
         value = float(text)
-        span = self._span(tok, tok)
-        if not math.isfinite(value):
+        span = self._token_span(tok)
+        if value == _INF:
             self.run.value_error(error("E0006", f"`{tok.value}` is too large for a 64-bit float", span,
                                        "out of range", hint="the largest number is about 1.8e308"))
             value = 0.0
-        return _make(A.Number, value, unit, text.isdigit(), span)
+        return _NUMBER(value, unit, text.isdigit(), span)
 
     def string(self, c):
         raw = c[0].value[1:-1]
         value = re.sub(r"\\(.)", lambda m: _ESCAPES.get(m.group(1), m.group(1)), raw) if "\\" in raw else raw
-        return _make(A.String, value, self._span(c[0], c[0]))
+        return _STRING(value, self._token_span(c[0]))
 
     def name(self, c):
-        return _make(A.Name, c[0].value, self._span(c[0], c[0]))
+        return _NAME(c[0].value, self._token_span(c[0]))
 
     def call(self, c):
-        func = _make(A.Name, c[0].value, self._span(c[0], c[0]))
+        func = _NAME(c[0].value, self._token_span(c[0]))
         args, kwargs = [], []
         for item in c[1:-1]:
-            if isinstance(item, tuple):
-                kwargs.append(item[:2])
+            if item.__class__ is tuple:
+                kwargs.append(item)
             elif kwargs:
                 self.run.value_error(error(
                     "E0007", "a positional argument cannot follow a named one", item.span,
@@ -158,80 +175,77 @@ class _Builder(Transformer):
                     hint="move it before the named arguments, or give it its name"))
             else:
                 args.append(item)
-        return _make(A.Call, func, tuple(args), tuple(kwargs), self._span(c[0], c[-1]))
+        return _CALL(func, tuple(args), tuple(kwargs), self._span(c[0], c[-1]))
 
     def kwarg(self, c):
-        return (c[0].value, c[1], self._span(c[0], c[1]))
+        return (c[0].value, c[1])
 
     def listexpr(self, c):
-        return _make(A.ListExpr, tuple(c[1:-1]), self._span(c[0], c[-1]))
+        return _LIST(tuple(c[1:-1]), self._span(c[0], c[-1]))
 
     def binop(self, c):
-        return _make(A.BinOp, c[1].value, c[0], c[2], self._span(c[0], c[2]))
+        return _BINOP(c[1].value, c[0], c[2], self._span(c[0], c[2]))
 
     def neg(self, c):
-        return _make(A.Neg, c[1], self._span(c[0], c[1]))
+        return _NEG(c[1], self._span(c[0], c[1]))
 
     def member(self, c):
-        return _make(A.Member, c[0], c[1].value, self._span(c[0], c[1]))
+        return _MEMBER(c[0], c[1].value, self._span(c[0], c[1]))
 
     def net(self, c):
         tok = c[0]
-        span = self._span(tok, tok)
-        import numpy as np
-
-        from .netbody import NetError, read_net   # numpy is loaded only when a file has a net
-
+        netbody = _netbody()
         try:
-            shape, width, data = read_net(tok.value)
-        except NetError as e:
+            shape, width, data = netbody.read_net(tok.value)
+        except netbody.NetError as e:
             self.run.value_error(error("E0004", e.message, self.run.span(tok.start_pos + e.start, tok.start_pos + e.end),
                                        hint=e.hint))
-            shape, width, data = (1,), 1, np.zeros((1, 1))   # a stand-in: the statement is dropped
-        return A.Net(shape, width, data, span)
+            shape, width, data = (1,), 1, netbody.np.zeros((1, 1))   # a stand-in: the statement is dropped
+        return _NET(shape, width, data, self._token_span(tok))
 
     # -- declarations
     def type(self, c):
-        return A.TypeRef(c[0].value, tuple(x for x in c[1:] if isinstance(x, A.TypeRef)), self._span(c[0], c[-1]))
+        return _TYPEREF(c[0].value, tuple(x for x in c[1:] if isinstance(x, A.TypeRef)), self._span(c[0], c[-1]))
 
     def param(self, c):
-        return A.Param(c[0].value, c[1], self._span(c[0], c[1]))
+        return _PARAM(c[0].value, c[1], self._span(c[0], c[1]))
 
     def annotation(self, c):
-        args = tuple(x[:2] for x in c[1:] if isinstance(x, tuple))
-        return A.Annotation(c[0].value[1:], args, self._span(c[0], c[-1]))
+        args = tuple(x for x in c[1:] if x.__class__ is tuple)
+        return _ANNOTATION(c[0].value[1:], args, self._span(c[0], c[-1]))
 
     # -- statements
     def units(self, c):
         unit = c[1].value
         if unit not in A.LENGTH_UNITS:
-            self.run.value_error(error("E0008", f"unknown units `{unit}`", self._span(c[1], c[1]),
+            self.run.value_error(error("E0008", f"unknown units `{unit}`", self._token_span(c[1]),
                                        "expected mm, cm, m or in", hint="write `units mm;`"))
-        return self.run.statement(A.Units(unit, span=self._span(c[0], c[-1])))
+        return self.run.statement(_UNITS(unit, (), None, False, self._span(c[0], c[-1])))
 
     def tolerance(self, c):
-        return self.run.statement(A.Tolerance(self._number(c[1]), span=self._span(c[0], c[-1])))
+        return self.run.statement(_TOLERANCE(self._number(c[1]), (), None, False, self._span(c[0], c[-1])))
 
     def binding(self, c):
-        annotations = tuple(x for x in c if isinstance(x, A.Annotation))
-        rest = c[len(annotations):]
-        is_param = type(rest[0]) in _TOKENS and rest[0].type == "PARAM"
-        name = rest[1] if is_param else rest[0]
-        stmt = A.Binding(name.value, c[-2], is_param, annotations, span=self._span(c[0], c[-1]),
-                         name_span=self._span(name, name))
+        n = 0                              # annotations come first
+        while c[n].__class__ is A.Annotation:
+            n += 1
+        is_param = c[n].__class__ in _TOKENS and c[n].type == "PARAM"
+        name = c[n + 1] if is_param else c[n]
+        stmt = _BINDING(name.value, c[-2], is_param, tuple(c[:n]), (), None, False, self._span(c[0], c[-1]),
+                        self._token_span(name))
         return self.run.statement(stmt)
 
     def fndef(self, c):
         annotations = tuple(x for x in c if isinstance(x, A.Annotation))
         name = c[len(annotations) + 1]
         params = tuple(x for x in c if isinstance(x, A.Param))
-        stmt = A.FnDef(name.value, params, c[-2], annotations, span=self._span(c[0], c[-1]),
-                       name_span=self._span(name, name))
+        stmt = _FNDEF(name.value, params, c[-2], annotations, (), None, False, self._span(c[0], c[-1]),
+                      self._token_span(name))
         return self.run.statement(stmt)
 
     def export(self, c):
-        names = tuple(A.Name(t.value, self._span(t, t)) for t in c[1:-1])
-        return self.run.statement(A.Export(names, span=self._span(c[0], c[-1])))
+        names = tuple(_NAME(t.value, self._token_span(t)) for t in c[1:-1])
+        return self.run.statement(_EXPORT(names, (), None, False, self._span(c[0], c[-1])))
 
     def start(self, c):
         return None

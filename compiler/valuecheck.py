@@ -12,19 +12,20 @@ problems relative to a spline (count, multiplicity for its degree) where it is u
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from . import ast as A
 from . import types as T
+from .builtins import FUNCTIONS
 from .diagnostics import error
 from .values import (Folder, Knots, Point, Problem, as_int, degree_problem, knot_order_problem,
                      knot_vector_problems, multiplicity_problem, ragged_problem, too_few_points_problem,
                      weight_problem)
 
 
-@dataclass(frozen=True)
-class Arg:
-    """An argument bound to a parameter: its expression, type and positional index (None if named)."""
+class Arg(NamedTuple):
+    """An argument bound to a parameter: its expression, type and positional index (None if named).
+    A tuple: the checker makes one per argument of every call."""
 
     expr: object
     type: T.Type
@@ -62,10 +63,11 @@ class ValueChecker:
     def check(self, name: str, call: A.Call, bound: dict, local: frozenset) -> T.Type | None:
         """Check `call` of builtin `name`; returns a refined result type (a bspline over a 2-D net is a
         curve2) or None."""
+        method = _RULES.get(name)
+        if method is None:
+            return None
         self.local = local
-        args = {k: v[0].expr for k, v in bound.items() if len(v) == 1}
-        method = getattr(self, "_" + name, None)
-        return method(args) if method else None
+        return method(self, {k: v[0].expr for k, v in bound.items() if len(v) == 1})
 
     def fraction(self, ann: str, key: str, expr) -> None:
         v = self.fold(expr)
@@ -290,3 +292,7 @@ class ValueChecker:
         elif abs(end - start) > 2 * math.pi * (1 + 1e-12):
             self.report(error("E0419", f"the revolution sweeps {math.degrees(abs(end - start)):g}deg, "
                               "more than a full turn", where.span, "over 360deg"))
+
+
+#: builtin name -> its check (the method `_name` above), looked up once
+_RULES = {name: getattr(ValueChecker, "_" + name) for name in FUNCTIONS if hasattr(ValueChecker, "_" + name)}

@@ -46,6 +46,19 @@ def test_fast_driver_builds_the_same_tree_and_spans_as_lark(program):
     assert spans(fast) == spans(slow)
 
 
+@SETTINGS
+@given(programs())
+def test_compiled_statement_shapes_build_what_the_table_builds(program):
+    """The program four times over: a statement shape is first built by running the table, then by
+    the function compiled from it (rgm.compiler.lalr); both must give lark's tree and spans."""
+    text = format_program(program) * 4
+    fast, d1 = parse(text, "gen.rgm")
+    slow, d2 = parse(text, "gen.rgm", fast=False)
+    assert fast == slow and d1 == d2
+    spans = lambda p: [n.span for n in A.walk(p) if hasattr(n, "span")]
+    assert spans(fast) == spans(slow)
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(1, 6), st.integers(1, 6), st.integers(1, 4), st.data())
 def test_net_values_round_trip_exactly(rows, cols, width, data):
