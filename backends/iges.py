@@ -411,15 +411,15 @@ def write_iges(model, path, *, verify: bool = False, nurbs_only: bool = False, t
     from rgm.atomic import temp_path_beside, write_atomic
 
     path = Path(path)
-    text = iges_file(model, file_name=path.name, nurbs_only=nurbs_only, trim_entity=trim_entity,
+    data = iges_file(model, file_name=path.name, nurbs_only=nurbs_only, trim_entity=trim_entity,
                      pcurve_preference=pcurve_preference, tol=tol, color=color).to_bytes()
     if not verify:
-        return write_atomic(path, text)
+        return write_atomic(path, data)
     from .iges_verify import verify_iges
 
     tmp = temp_path_beside(path)
     try:
-        write_atomic(tmp, text)
+        write_atomic(tmp, data)
         verify_iges(model, tmp, tol=tol)
         os.replace(tmp, path)
     finally:
