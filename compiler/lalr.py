@@ -20,11 +20,12 @@ caller re-parses with lark's own parser, whose interactive state the recovery ne
 from __future__ import annotations
 
 import re
+from typing import NamedTuple
 
 from lark import Lark
 from lark.parsers.lalr_analysis import Shift
 
-# master regex order: first match wins, so longer/higher-priority forms come first
+# master regex order: first match wins, so longer/higher-priority forms come first (NET first: see splitter)
 _ORDER = ("NET", "COMMENT", "NUMBER", "STRING", "ANNOTATION", "NAME", "DEFINE")
 _BLANK = "[ \t\f\r\n]"
 _KIND_CACHE = 200_000   # distinct token spellings remembered between parses
@@ -32,15 +33,19 @@ _SHAPE_CACHE = 20_000   # statement shapes remembered between parses
 _COMPILE_AFTER = 2      # a shape is compiled on its 3rd statement (compiling costs about 3 table runs)
 
 
-class Tok:
+class Tok(NamedTuple):
     """A token as the builder sees it: type, text and position (named like Span's fields), without
-    the cost of lark's Token (a str subclass). `from_lark` converts one of those."""
+    the cost of lark's Token (a str subclass). A tuple, made by `_tuple_new` without a Python call;
+    `from_lark` converts a lark Token."""
 
-    __slots__ = ("type", "value", "start_pos", "end_pos", "line", "col", "end_line", "end_col")
-
-    def __init__(self, type_, value, start_pos, end_pos, line, col, end_line, end_col):
-        self.type, self.value, self.start_pos, self.end_pos = type_, value, start_pos, end_pos
-        self.line, self.col, self.end_line, self.end_col = line, col, end_line, end_col
+    type: str
+    value: str
+    start_pos: int
+    end_pos: int
+    line: int
+    col: int
+    end_line: int
+    end_col: int
 
     def __str__(self):
         return self.value
@@ -48,6 +53,9 @@ class Tok:
     @classmethod
     def from_lark(cls, t) -> "Tok":
         return cls(t.type, t.value, t.start_pos, t.end_pos, t.line, t.column, t.end_line, t.end_column)
+
+
+_tuple_new = tuple.__new__
 
 
 class FastLALR:
@@ -67,10 +75,12 @@ class FastLALR:
         order = _ORDER + tuple(rest)
         # any other character is an _ERROR token, so nothing is passed over silently
         alternatives = [terms[n].pattern.to_regexp() for n in order] + [f"(?!{_BLANK})."]
-        # one C call splits the text into (blanks, token) pairs (trailing blanks simply end it) ...
-        self.splitter = re.compile(f"({_BLANK}*)(" + "|".join(f"(?:{a})" for a in alternatives) + ")", re.DOTALL)
-        # ... and a token's kind is found once per distinct spelling: the first alternative that
-        # matches it whole is the one that matched it in the text (terminals have no lookahead)
+        # one C call splits the text into (blanks, net, token) triples (trailing blanks simply end it):
+        # a net (the first alternative) has a group of its own, so that its kind needs no look-up ...
+        self.splitter = re.compile(f"({_BLANK}*)(?:({alternatives[0]})|(" + "|".join(f"(?:{a})" for a in alternatives[1:])
+                                   + "))", re.DOTALL)
+        # ... and any other token's kind is found once per distinct spelling: the first alternative
+        # that matches it whole is the one that matched it in the text (terminals have no lookahead)
         self.classify = re.compile("|".join(f"(?P<{n}>{a})" for n, a in zip(order + ("_ERROR",), alternatives)),
                                    re.DOTALL).fullmatch
         self.kinds: dict[str, str] = {}
@@ -104,26 +114,28 @@ class FastLALR:
         toks: list[Tok] = []     # the kept tokens of the statement being read
         shape: list[str] = []    # the kinds of all its tokens (keyword spellings as themselves)
         pos, line, bol = 0, 1, 0           # offset after the last token, its line, where that line begins
-        for blank, value in self.splitter.findall(text):
+        for blank, net, value in self.splitter.findall(text):
             start = pos + len(blank)
-            pos = start + len(value)
             if "\n" in blank:
                 line += blank.count("\n")
                 bol = start - len(blank) + blank.rindex("\n") + 1
-            kind = kinds.get(value)
-            if kind is None:
-                kind = kinds[value] = classify(value).lastgroup
-            if kind in dropped:
-                shape.append(kind)
-                continue
-            if kind == "NET":
+            if net:
+                value, kind = net, "NET"
+                pos = start + len(value)
                 col, first_line = start - bol + 1, line
                 if "\n" in value:
                     line += value.count("\n")
                     bol = start + value.rindex("\n") + 1
-                tok = Tok(kind, value, start, pos, first_line, col, line, pos - bol + 1)
+                tok = _tuple_new(Tok, (kind, value, start, pos, first_line, col, line, pos - bol + 1))
             else:
-                tok = Tok(kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1)
+                pos = start + len(value)
+                kind = kinds.get(value)
+                if kind is None:
+                    kind = kinds[value] = classify(value).lastgroup
+                if kind in dropped:
+                    shape.append(kind)
+                    continue
+                tok = _tuple_new(Tok, (kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1))
                 if kind == "COMMENT":
                     on_comment(tok)
                     continue
@@ -206,7 +218,7 @@ class _Direct:
         return self.toks[k]
 
     def retype(self, k: int, kind: str) -> None:
-        self.toks[k].type = kind
+        self.toks[k] = self.toks[k]._replace(type=kind)
 
     def node(self, method: str, children: list):
         return self.methods[method](children)
@@ -226,7 +238,7 @@ class _Source:
         return f"t[{k}]"
 
     def retype(self, k: int, kind: str) -> None:
-        self.lines.append(f"t[{k}].type = {kind!r}")
+        self.lines.append(f"t[{k}] = t[{k}]._replace(type={kind!r})")
 
     def node(self, method: str, children: list) -> str:
         return f"{method}([{', '.join(children)}])"

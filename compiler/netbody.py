@@ -43,14 +43,15 @@ def read_net(text: str) -> tuple[tuple[int, ...], int, np.ndarray]:
     """
     head = _HEAD.match(text)
     shape = tuple(int(g) for g in head.groups() if g is not None)
-    body_start, body = head.end(), text[head.end():-1]
+    body_start, body_end = head.end(), len(text) - 1
     if 0 in shape or max(shape) > 10**8:
         raise NetError(f"a net needs between 1 and 10^8 rows and columns, not `{' x '.join(map(str, shape))}`",
                        0, head.end() - 1)
-    fast = _fast_read(body) if len(body) >= FAST_MIN else None
+    fast = _fast_read(text, body_start, body_end) if body_end - body_start >= FAST_MIN else None
     if fast is not None:
         data, width, count = fast
     else:
+        body = text[body_start:body_end]
         entries = _entries(body, body_start)
         width, count = len(entries[0]), len(entries)
     if width > MAX_WIDTH:
@@ -129,43 +130,62 @@ def _is_float(text: str) -> bool:
 
 # ------------------------------------------------------------------------------------ vectorised reader
 
-_PAD = 16    # blank bytes on either side of the body, so that 16-byte windows never leave the buffer
+_PAD = 16      # blanks before each chunk, so that a number's 16-byte window stays inside it
+_CHUNK = 1 << 20
 _BLANK, _NUMBER, _COMMA, _OTHER = 0, 1, 2, 3
 _CLASSES = bytes(_NUMBER if c in b"0123456789eE+-." else _COMMA if c == ord(",") else
                  _BLANK if c in b" \t\n\r\f\v" else _OTHER for c in range(256))
 
 
-def _fast_read(body: str) -> tuple[np.ndarray, int, int] | None:
-    """(flat data, width, entry count) of a well-formed body, or None for anything the exact reader
-    should look at: a stray character, a ragged or empty body, a number that does not read."""
-    if not body.isascii():
+def _fast_read(text: str, start: int, end: int) -> tuple[np.ndarray, int, int] | None:
+    """(flat data, width, entry count) of the well-formed body text[start:end], or None for anything
+    the exact reader should look at: a stray character, a ragged or empty body, a number that does
+    not read. The body goes in chunks of about 1 MB that end just after a comma: each holds whole
+    entries, so every check stays inside a chunk, and the chunks' buffers are reused (fresh memory
+    costs a page fault per 4 kB)."""
+    if not text.isascii():
         return None
-    raw = bytearray(b" " * _PAD)
-    raw += body.encode("ascii")
-    raw += b" " * _PAD
+    parts, width, count = [], None, 0
+    while start < end:
+        stop = text.find(",", min(start + _CHUNK, end), end) + 1 or end
+        chunk = _read_chunk(text[start:stop], width)
+        if chunk is None:
+            return None
+        values, width, entries = chunk
+        parts.append(values)
+        count += entries
+        start = stop
+    data = np.concatenate(parts) if len(parts) > 1 else parts[0] if parts else None
+    if data is None or not np.isfinite(data).all():
+        return None
+    return data, width, count
+
+
+def _read_chunk(piece: str, width: int | None) -> tuple[np.ndarray, int, int] | None:
+    """(values, width, entry count) of whole entries; `width` is the first chunk's (None: find it)."""
+    raw = (" " * _PAD + piece + " ").encode("ascii")
     cls = np.frombuffer(raw.translate(_CLASSES), dtype=np.uint8)
     if cls.max() == _OTHER:
         return None
     number = cls == _NUMBER
-    edges = np.flatnonzero(number[1:] != number[:-1]) + 1    # the padding makes them come in pairs
+    edges = np.flatnonzero(number[1:] != number[:-1]) + 1    # the blanks around make them come in pairs
     starts, ends = edges[0::2], edges[1::2]
     commas = np.flatnonzero(cls == _COMMA)
-    if starts.size == 0:
+    if width is None:
+        width = int(np.searchsorted(starts, commas[0])) if commas.size else int(starts.size)
+        if width == 0:
+            return None
+    # every entry holds `width` numbers: comma j follows number (j + 1) * width - 1 and precedes
+    # number (j + 1) * width; only the body's last entry has no comma after it (or one, trailing)
+    entries = commas.size + bool(starts.size and (not commas.size or ends[-1] > commas[-1]))
+    if starts.size != entries * width:
         return None
-    # every entry holds as many numbers as the first: comma j follows number (j + 1) * width - 1
-    # and precedes number (j + 1) * width; one comma after the last number is allowed
-    width = int(np.searchsorted(starts, commas[0])) if commas.size else int(starts.size)
-    count = starts.size // width if width else 0
-    if width == 0 or count * width != starts.size or commas.size not in (count - 1, count):
-        return None
-    after = (np.arange(1, commas.size + 1) * width)
+    after = np.arange(1, commas.size + 1) * width
     inner = after < starts.size
     if not ((ends[after - 1] <= commas).all() and (commas[inner] < starts[after[inner]]).all()):
         return None
-    data = _decimals(raw, body, starts, ends)
-    if data is None or not np.isfinite(data).all():
-        return None
-    return data, width, count
+    values = _decimals(raw, starts, ends) if starts.size else np.empty(0)   # only blanks after the last comma
+    return None if values is None else (values, width, entries)
 
 
 _U64 = np.uint64
@@ -192,7 +212,7 @@ def _digits8(v: np.ndarray) -> np.ndarray:
     return ((v & _U64(0x0000FFFF0000FFFF)) * _U64(42949672960001)) >> _U64(32)
 
 
-def _decimals(raw, body: str, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
+def _decimals(raw: bytes, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | None:
     """The numbers at raw[starts:ends] as float64, exactly as strtod reads them; None if one is not a number.
 
     Plain decimals `-?ddd.ddd` of at most 16 characters after the sign are converted without a Python
@@ -237,13 +257,13 @@ def _decimals(raw, body: str, starts: np.ndarray, ends: np.ndarray) -> np.ndarra
     redo = np.flatnonzero(bad)
     if redo.size > values.size // 8:        # mostly other forms (say, 17-digit reprs): strtod over all
         try:
-            values = np.fromstring(body.replace(",", " "), dtype=float, sep=" ")
+            values = np.fromstring(raw.replace(b",", b" "), dtype=float, sep=" ")
         except ValueError:
             return None
         return values if values.size == starts.size else None   # "1-2" reads as two numbers
     for i in redo.tolist():
         try:
-            values[i] = float(body[starts[i] - _PAD:ends[i] - _PAD])
+            values[i] = float(raw[starts[i]:ends[i]])
         except ValueError:
             return None
     return values

@@ -131,9 +131,8 @@ class _Builder(Transformer):
         return _SPAN(self.run.filename, a.line, a.col, b.end_line, b.end_col, a.start_pos, b.end_pos)
 
     def _token_span(self, tok) -> Span:
-        if tok.__class__ is not Tok:
-            tok = Tok.from_lark(tok)
-        return _SPAN(self.run.filename, tok.line, tok.col, tok.end_line, tok.end_col, tok.start_pos, tok.end_pos)
+        _, _, start, end, line, col, end_line, end_col = tok if tok.__class__ is Tok else Tok.from_lark(tok)
+        return _SPAN(self.run.filename, line, col, end_line, end_col, start, end)
 
     # -- expressions
     def number(self, c):

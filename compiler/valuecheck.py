@@ -48,6 +48,7 @@ class ValueChecker:
     def __init__(self, folder: Folder, report):
         self.folder, self.report = folder, report
         self.local: frozenset = frozenset()
+        self.knot_problems: dict[tuple, list[Problem]] = {}
 
     def fold(self, expr):
         return None if expr is None else self.folder.fold(expr, self.local)
@@ -94,9 +95,15 @@ class ValueChecker:
     def _knots_against(self, args, key: str, degree, count, what, code="E0403", notes=()) -> None:
         """Count and multiplicity of the knot vector `args[key]` for a spline of `degree` over `count`."""
         knots = self.fold(args.get(key))
-        if not isinstance(knots, Knots) or len(knots.values) < 2 or knot_order_problem(knots.values) is not None:
-            return   # not constant, or already reported where it is built
-        for prob in knot_vector_problems(knots, degree, count, what):
+        if not isinstance(knots, Knots):
+            return   # not constant
+        memo = (knots, degree, count, what)
+        problems = self.knot_problems.get(memo)
+        if problems is None:   # a file repeats a few knot vectors: their rules are checked once
+            problems = self.knot_problems[memo] = (
+                [] if len(knots.values) < 2 or knot_order_problem(knots.values) is not None   # reported where built
+                else knot_vector_problems(knots, degree, count, what))
+        for prob in problems:
             if prob.code == "E0404" and knots.helper != "knots":
                 continue   # clamped/uniform report their own multiplicities
             expr = args[key]

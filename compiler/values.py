@@ -185,6 +185,7 @@ class Folder:
         self.user_fns = set(user_fns)
         self.memo: dict[str, object] = {}
         self.busy: set[str] = set()
+        self.uniform: dict[tuple[int, int], Knots] = {}
 
     def binding(self, name: str):
         if name in self.memo:
@@ -259,7 +260,11 @@ class Folder:
             return None
         if name == "uniform":
             count = as_int(get(1, "count"))
-            return uniform_knots(degree, count) if count is not None and count > degree else None
+            if count is None or count <= degree:
+                return None
+            if (degree, count) not in self.uniform:   # one object per knot vector: checks memoise on it
+                self.uniform[degree, count] = uniform_knots(degree, count)
+            return self.uniform[degree, count]
         interior = get(1, "interior") if _arg(call, 1, "interior") is not None else ()
         if isinstance(interior, tuple) and all(isinstance(v, float) for v in interior):
             return clamped_knots(degree, interior)

@@ -79,7 +79,11 @@ def test_the_vectorised_reader_reads_what_float_reads(width, seed):
     entries = [[number() for _ in range(width)] for _ in range(n)]
     body = rnd.choice([", ", ",\n  ", " ,", ","]).join(" ".join(e) for e in entries) + rnd.choice(["", ",", " ,\n"])
     assert len(body) >= FAST_MIN
-    data, w, count = _fast_read(body)
+    netbody._CHUNK = rnd.choice([64, 4096, 1 << 20])     # chunks end after a comma, several per body
+    try:
+        data, w, count = _fast_read(body, 0, len(body))
+    finally:
+        netbody._CHUNK = 1 << 20
     assert (w, count) == (width, n)
     assert data.tobytes() == np.array([float(x) for e in entries for x in e]).tobytes()
 
@@ -96,13 +100,13 @@ def test_both_readers_report_the_same_error(mistake, at):
     text = f"net {len(good) + mistake.count(',')} [" + ", ".join(good) + "]"
     assert len(text) >= FAST_MIN
     errors = []
-    for limit in (FAST_MIN, 10**12):      # vectorised first, then the exact reader alone
-        netbody.FAST_MIN = limit
+    for limit, chunk in ((FAST_MIN, 1 << 20), (FAST_MIN, 100), (10**12, 1 << 20)):   # vectorised, then exact
+        netbody.FAST_MIN, netbody._CHUNK = limit, chunk
         try:
             read_net(text)
             errors.append(None)
         except NetError as e:
             errors.append((e.message, e.start, e.end, e.hint))
         finally:
-            netbody.FAST_MIN = FAST_MIN
-    assert errors[0] == errors[1] and errors[0] is not None
+            netbody.FAST_MIN, netbody._CHUNK = FAST_MIN, 1 << 20
+    assert errors[0] == errors[1] == errors[2] and errors[0] is not None
