@@ -5,14 +5,17 @@ Workloads:
       annotations and comments, small 4 x 4 nets, exports (targets: >= 1 MB/s parse + check);
   (b) one bicubic surface holding a 1000 x 1000 control net in the dense `net` form, about 27 MB
       (target: >= 30 MB/s parse + check).
-For each: rgm's parse (fast LALR driver building the AST, nets read by numpy), rgm's parse + check
+For each: rgm's parse (lark's LALR table run once per statement shape and compiled, nets read by
+numpy: rgm.compiler.lalr, rgm.compiler.netbody), rgm's parse + check
 (`rgm.compiler.check`, skipped with a message if it is not importable), lark's own LALR parse of the
 same grammar building its generic parse tree (the peer: what `Lark(parser="lalr")` costs without
 any AST), and for (a) rgm's parse through lark's parse loop (`fast=False`).
 
 The machine running this may be shared: besides wall-clock MB/s the script prints CPU-time MB/s
 (time.process_time) and the load average, and a calibration loop's speed relative to a nominal
-50 M simple iterations/s, so figures from a loaded machine can be read for what they are.
+50 M simple iterations/s, so figures from a loaded machine can be read for what they are. Each
+workload ends with a PASS/FAIL line for its target, judged on wall-clock time; every figure is of a
+single cold run (one parse of text the process has not parsed before, as `rgmc check` does).
 
 Run: python benchmarks/bench_frontend.py [--small]   (--small: 1 MB and 300 x 300, for a quick look)
 """
@@ -89,7 +92,7 @@ def calibration() -> float:
     return n / (time.perf_counter() - w) / 50e6
 
 
-def report(label: str, text: str, plain: Lark, slow_too: bool) -> None:
+def report(label: str, text: str, plain: Lark, slow_too: bool, target: float) -> None:
     mb = len(text.encode()) / 1e6
     print(f"\n{label}: {mb:.2f} MB")
     rows = []
@@ -102,6 +105,7 @@ def report(label: str, text: str, plain: Lark, slow_too: bool) -> None:
         rows.append(("rgm parse + check", wall + w2, cpu + c2))
     else:
         print("  (rgm.compiler.check not importable: parse only)")
+    judged, total_wall, total_cpu = rows[-1]
     if slow_too:
         w3, c3, _ = timed(lambda: parse(text, "bench.rgm", fast=False))
         rows.append(("rgm parse via lark's loop", w3, c3))
@@ -111,6 +115,11 @@ def report(label: str, text: str, plain: Lark, slow_too: bool) -> None:
         print(f"  {name:30s} {w:7.2f} s  {mb / w:7.2f} MB/s wall   {mb / c:7.2f} MB/s cpu")
     print(f"  statements: {len(program.statements)}, errors: {len(errors)}"
           + (f" (first: {errors[0].message})" if errors else ""))
+    peer = rows[-1][1]
+    print(f"  {judged} is {peer / total_wall:.1f}x the speed of lark's parse tree alone (wall)")
+    verdict = "PASS" if mb / total_wall >= target and not errors else "FAIL"
+    print(f"  target: {judged} >= {target:g} MB/s: {verdict} ({mb / total_wall:.2f} MB/s wall, "
+          f"{mb / total_cpu:.2f} MB/s cpu)")
 
 
 def main(argv: list[str]) -> int:
@@ -119,9 +128,9 @@ def main(argv: list[str]) -> int:
           f"calibration {calibration():.2f} x nominal Python speed")
     plain = Lark(grammar_text(), parser="lalr", lexer="contextual")
     parse("warm := 1;", "warm.rgm")
-    report("(a) statement-heavy file", statement_heavy(1_000_000 if small else 5_000_000), plain, True)
+    report("(a) statement-heavy file", statement_heavy(1_000_000 if small else 5_000_000), plain, True, 1.0)
     n = 300 if small else 1000
-    report(f"(b) {n} x {n} control net", big_net(n, np.random.default_rng(0)), plain, False)
+    report(f"(b) {n} x {n} control net", big_net(n, np.random.default_rng(0)), plain, False, 30.0)
     return 0
 
 

@@ -24,6 +24,7 @@ from .diagnostics import Diagnostic, error, sort_and_dedupe, warning
 from .resolve import Resolution, resolve
 from .suggest import did_you_mean, suggest
 from .units import to_model
+from .valuecheck import RULES as VALUE_RULES
 from .valuecheck import Arg, ValueChecker
 from .values import Folder, ordinal
 
@@ -49,6 +50,7 @@ class CheckResult:
         return self.overrides.get(name, self.bindings[name].expr)
 
 
+_NO_LOCALS: frozenset = frozenset()
 #: recursion limit for a second attempt on very deep expressions (about 4 frames per level)
 DEEP_LIMIT = 100_000
 ARITHMETIC = ("arithmetic: point - point = vec, point ± vec = point, vec ± vec, number × vec, vec / number, "
@@ -102,6 +104,7 @@ class _Checker:
         self.busy: set[str] = set()
         self.fn_results: dict[str, T.Type] = {}
         self.fn_sigs: dict[str, Signature] = {}
+        self.calls: dict[tuple, tuple[T.Type, tuple]] = {}   # see `call`
         self.folder = Folder(res.bindings, res.overrides, res.units, res.fns, self.types)
         self.values = ValueChecker(self.folder, self.diags.append)
 
@@ -258,9 +261,27 @@ class _Checker:
         builtin = FUNCTIONS.get(name)
         if builtin is None:
             return T.ANY   # reported by resolve
+        # calls with the same argument types bind the same way: the outcome is looked up once
+        key = (name, tuple(t for _, t in args), tuple((k, t) for k, _, t in kwargs))
+        known = self.calls.get(key)
+        if known is None:
+            known = self.overload(name, builtin, args, kwargs, call.span)
+            if known[1] is not None:
+                self.calls[key] = known
+        result, slots = known
+        if slots is not None and name in VALUE_RULES:   # value checks only on calls whose arguments fit
+            exprs = [e for e, _ in args] + [e for _, e, _ in kwargs]
+            local = frozenset(env) if env else _NO_LOCALS
+            result = self.values.check(name, call, {p: exprs[i] for p, i in slots}, local) or result
+        return result
+
+    def overload(self, name: str, builtin, args, kwargs, span) -> tuple[T.Type, tuple | None]:
+        """Bind a builtin call, choose its overload and report what does not fit. Returns the result
+        type and, when nothing was reported, the parameters given exactly one argument as (name,
+        index into the positional then named arguments) pairs; None otherwise."""
         notes = builtin.notes
         clean = len(self.diags)
-        bound = self.bind(name, builtin.overloads[0], args, kwargs, call.span, notes)
+        bound = self.bind(name, builtin.overloads[0], args, kwargs, span, notes)
         chosen, best, best_bad = None, None, None
         for sig in builtin.overloads:
             bad = [(p, a) for p in sig.params for a in bound.get(p.name, ()) if not T.accepts(p.type, a.type)]
@@ -279,9 +300,10 @@ class _Checker:
                 self.mismatch(name, param.name, expected, arg, notes)
             chosen = best
         result = self.result_type(chosen, bound)
-        if len(self.diags) == clean:   # value checks only on calls whose arguments fit
-            result = self.values.check(name, call, bound, frozenset(env)) or result
-        return result
+        if len(self.diags) != clean:
+            return result, None
+        index = {id(e): i for i, e in enumerate([e for e, _ in args] + [e for _, e, _ in kwargs])}
+        return result, tuple((p, index[id(v[0].expr)]) for p, v in bound.items() if len(v) == 1)
 
     def result_type(self, sig: Signature, bound: dict[str, list[Arg]]) -> T.Type:
         if sig.result.kind != "var":

@@ -56,6 +56,9 @@ class Tok(NamedTuple):
 
 
 _tuple_new = tuple.__new__
+# what the lexer loop does with a token: keep it, drop it (punctuation no rule keeps), hand a comment
+# over, stop at an error, or end the statement (`;`)
+_KEPT, _DROPPED, _COMMENT, _ERROR, _END = "kept", "dropped", "comment", "error", "end"
 
 
 class FastLALR:
@@ -83,7 +86,7 @@ class FastLALR:
         # that matches it whole is the one that matched it in the text (terminals have no lookahead)
         self.classify = re.compile("|".join(f"(?P<{n}>{a})" for n, a in zip(order + ("_ERROR",), alternatives)),
                                    re.DOTALL).fullmatch
-        self.kinds: dict[str, str] = {}
+        self.kinds: dict[str, tuple[str, str, str]] = {}   # spelling -> `learn(spelling)`
         # punctuation that no rule keeps (`(`, `,`, `:`, `.`) needs no token object
         kept = {sym.name for rule in frontend.callbacks for sym in rule.expansion
                 if sym.is_term and not sym.filter_out}
@@ -104,7 +107,7 @@ class FastLALR:
         """Parse `text`, calling the builder as lark would; False at the first error (nothing is
         undone: the caller discards what was built and re-parses with lark). Lines and columns are
         counted along the way: only blanks and nets can hold a newline."""
-        kinds, classify, keywords, dropped = self.kinds, self.classify, self.keywords, self.dropped
+        kinds = self.kinds
         if len(kinds) > _KIND_CACHE:
             kinds.clear()
         for cache in self.shapes:
@@ -113,6 +116,7 @@ class FastLALR:
         shapes = self.shapes[0]
         toks: list[Tok] = []     # the kept tokens of the statement being read
         shape: list[str] = []    # the kinds of all its tokens (keyword spellings as themselves)
+        keep, note = toks.append, shape.append
         pos, line, bol = 0, 1, 0           # offset after the last token, its line, where that line begins
         for blank, net, value in self.splitter.findall(text):
             start = pos + len(blank)
@@ -120,7 +124,7 @@ class FastLALR:
                 line += blank.count("\n")
                 bol = start - len(blank) + blank.rindex("\n") + 1
             if net:
-                value, kind = net, "NET"
+                value, kind, key, role = net, "NET", "NET", _KEPT
                 pos = start + len(value)
                 col, first_line = start - bol + 1, line
                 if "\n" in value:
@@ -129,21 +133,22 @@ class FastLALR:
                 tok = _tuple_new(Tok, (kind, value, start, pos, first_line, col, line, pos - bol + 1))
             else:
                 pos = start + len(value)
-                kind = kinds.get(value)
-                if kind is None:
-                    kind = kinds[value] = classify(value).lastgroup
-                if kind in dropped:
-                    shape.append(kind)
+                known = kinds.get(value)
+                if known is None:
+                    known = kinds[value] = self.learn(value)
+                kind, key, role = known
+                if role is _DROPPED:
+                    note(key)
                     continue
                 tok = _tuple_new(Tok, (kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1))
-                if kind == "COMMENT":
+                if role is _COMMENT:
                     on_comment(tok)
                     continue
-                if kind == "_ERROR":
+                if role is _ERROR:
                     return False
-            toks.append(tok)
-            shape.append(value if kind == "NAME" and value in keywords else kind)
-            if kind == "SEMI":
+            keep(tok)
+            note(key)
+            if role is _END:
                 key = tuple(shape)
                 build = shapes.get(key, 0)
                 if type(build) is int:     # built `build` times: run the table, compile once it repeats
@@ -158,8 +163,18 @@ class FastLALR:
                 if build is not None:
                     build(toks)
                 shapes = self.shapes[1]
-                toks, shape = [], []
+                toks.clear()     # nothing keeps the lists: the next statement reuses them
+                shape.clear()
         return not shape                   # text after the last `;` is an unfinished statement
+
+    def learn(self, value: str) -> tuple[str, str, str]:
+        """(kind, shape key, role) of a token spelling: the key is the kind, or the spelling itself
+        for a NAME that spells a keyword (`run` decides, by the table, which it is)."""
+        kind = self.classify(value).lastgroup
+        key = value if kind == "NAME" and value in self.keywords else kind
+        role = (_DROPPED if kind in self.dropped else _COMMENT if kind == "COMMENT" else
+                _ERROR if kind == "_ERROR" else _END if kind == "SEMI" else _KEPT)
+        return kind, key, role
 
     def run(self, shape: tuple[str, ...], first: bool, out):
         """Run the table over one statement shape (with `$END` after it), building through `out`

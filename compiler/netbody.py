@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import re
+from itertools import chain
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,6 +23,7 @@ _HEAD = re.compile(r"net\s+([0-9]+)(?:\s*x\s*([0-9]+))?\s*\[")
 _BAD_CHAR = re.compile(r"[^0-9eE+\-.,\t\n\r\f\v ]")
 _TOKEN = re.compile(r"[^\s,]+")
 MAX_WIDTH = 4
+_INF = float("inf")
 #: bodies at least this long go to the vectorised reader (below it numpy's fixed costs dominate)
 FAST_MIN = 20_000
 
@@ -86,38 +88,38 @@ def _entries(body: str, body_start: int) -> list[list[str]]:
         raise NetError(f"`{shown}` cannot appear in a net: only numbers separated by spaces, and commas "
                        "between entries", at, at + 1, hint)
     texts = body.split(",")
-    entries = [t.split() for t in texts]
+    entries = list(map(str.split, texts))
     if len(entries) > 1 and not entries[-1]:
         entries.pop()
     width = len(entries[0])
     if not any(entries):
         raise NetError("this net holds no numbers", 0, len(body) + body_start + 1,
                        "write entries such as `[0 0 0, 1 0 0]`")
-    for k, entry in enumerate(entries):
-        if len(entry) != width:
-            a = body_start + sum(len(t) + 1 for t in texts[:k])
-            seg = texts[k]
-            lead, core = len(seg) - len(seg.lstrip()), seg.strip()
-            a, b = (a + lead, a + lead + len(core)) if core else (a, a + 1)
-            got = len(entry)
-            raise NetError(f"entry {k + 1} of this net has {got} number{'s' * (got != 1)}, "
-                           f"but the first entry has {width}", a, b,
-                           "every entry has the same count: `x y z` for points, `x y z w` with weights")
+    if len(set(map(len, entries))) > 1:
+        k = next(k for k, entry in enumerate(entries) if len(entry) != width)
+        a = body_start + sum(len(t) + 1 for t in texts[:k])
+        seg = texts[k]
+        lead, core = len(seg) - len(seg.lstrip()), seg.strip()
+        a, b = (a + lead, a + lead + len(core)) if core else (a, a + 1)
+        got = len(entries[k])
+        raise NetError(f"entry {k + 1} of this net has {got} number{'s' * (got != 1)}, "
+                       f"but the first entry has {width}", a, b,
+                       "every entry has the same count: `x y z` for points, `x y z w` with weights")
     return entries
 
 
 def _convert(entries: list[list[str]], body: str, body_start: int) -> np.ndarray:
     """The numbers of `entries` as one flat float64 array; NetError names the first bad number."""
     try:
-        data = np.array([float(x) for entry in entries for x in entry], dtype=float)
+        values = list(map(float, chain.from_iterable(entries)))
     except ValueError:
         m = next(m for m in _TOKEN.finditer(body) if not _is_float(m.group()))
         raise NetError(f"`{m.group()}` is not a number", body_start + m.start(), body_start + m.end()) from None
-    if not np.isfinite(data).all():
+    if _INF in values or -_INF in values:     # the only non-finite values a number of digits reads as
         m = next(m for m in _TOKEN.finditer(body) if not np.isfinite(float(m.group())))
         raise NetError(f"`{m.group()}` is too large for a 64-bit float", body_start + m.start(),
                        body_start + m.end())
-    return data
+    return np.array(values, dtype=float)
 
 
 def _is_float(text: str) -> bool:

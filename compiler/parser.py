@@ -106,6 +106,21 @@ _TYPEREF, _PARAM, _ANNOTATION, _UNITS, _TOLERANCE, _BINDING, _FNDEF, _EXPORT = m
     A.TypeRef, A.Param, A.Annotation, A.Units, A.Tolerance, A.Binding, A.FnDef, A.Export))
 
 
+def _read_number(text: str) -> tuple[float, str | None, bool]:
+    """(value, unit, is_int) of a NUMBER token's spelling."""
+    unit = None
+    if text[-1] > "9":                 # a letter: a unit suffix
+        for suffix in _UNIT_SUFFIXES:
+            if text.endswith(suffix):
+                text, unit = text[: -len(suffix)], suffix
+                break
+    return float(text), unit, text.isdigit()
+
+
+#: spelling -> `_read_number(spelling)`: files repeat their numbers (cleared when it grows large)
+_NUMBERS: dict[str, tuple[float, str | None, bool]] = {}
+
+
 @functools.cache
 def _netbody():
     from . import netbody   # numpy is loaded only when a file has a net
@@ -134,24 +149,24 @@ class _Builder(Transformer):
         _, _, start, end, line, col, end_line, end_col = tok if tok.__class__ is Tok else Tok.from_lark(tok)
         return _SPAN(self.run.filename, line, col, end_line, end_col, start, end)
 
-    # -- expressions
+    # -- expressions (the hottest callbacks build their token's span inline)
     def number(self, c):
         return self._number(c[0])
 
     def _number(self, tok) -> A.Number:
-        text, unit = tok.value, None
-        if text[-1] > "9":                 # a letter: a unit suffix
-            for suffix in _UNIT_SUFFIXES:
-                if text.endswith(suffix):
-                    text, unit = text[: -len(suffix)], suffix
-                    break
-        value = float(text)
-        span = self._token_span(tok)
+        _, text, start, end, line, col, end_line, end_col = tok if tok.__class__ is Tok else Tok.from_lark(tok)
+        known = _NUMBERS.get(text)
+        if known is None:
+            if len(_NUMBERS) > 100_000:
+                _NUMBERS.clear()
+            known = _NUMBERS[text] = _read_number(text)
+        value, unit, is_int = known
+        span = _SPAN(self.run.filename, line, col, end_line, end_col, start, end)
         if value == _INF:
-            self.run.value_error(error("E0006", f"`{tok.value}` is too large for a 64-bit float", span,
+            self.run.value_error(error("E0006", f"`{text}` is too large for a 64-bit float", span,
                                        "out of range", hint="the largest number is about 1.8e308"))
             value = 0.0
-        return _NUMBER(value, unit, text.isdigit(), span)
+        return _NUMBER(value, unit, is_int, span)
 
     def string(self, c):
         raw = c[0].value[1:-1]
@@ -159,7 +174,8 @@ class _Builder(Transformer):
         return _STRING(value, self._token_span(c[0]))
 
     def name(self, c):
-        return _NAME(c[0].value, self._token_span(c[0]))
+        _, text, start, end, line, col, end_line, end_col = c[0] if c[0].__class__ is Tok else Tok.from_lark(c[0])
+        return _NAME(text, _SPAN(self.run.filename, line, col, end_line, end_col, start, end))
 
     def call(self, c):
         func = _NAME(c[0].value, self._token_span(c[0]))

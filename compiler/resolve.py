@@ -147,27 +147,42 @@ class _Resolver:
 
     # -------------------------------------------------------------------------------- references
     def references(self) -> None:
+        no_scope: frozenset[str] = frozenset()
         for name, stmt in {**self.r.bindings, **self.r.fns}.items():
-            scope = {p.name for p in stmt.params} if isinstance(stmt, A.FnDef) else set()
+            scope = {p.name for p in stmt.params} if isinstance(stmt, A.FnDef) else no_scope
             deps: list[tuple[str, A.Name]] = []
             for ann in stmt.annotations:
                 for _key, expr in ann.args:
-                    self.visit(expr, set(), None, deps)
+                    self.visit(expr, no_scope, None, deps)
             self.visit(stmt.body if isinstance(stmt, A.FnDef) else stmt.expr, scope,
                        name if scope else None, deps)
             self.r.deps[name] = deps
 
-    def visit(self, expr, scope: set[str], fn: str | None, deps) -> None:
+    def visit(self, expr, scope, fn: str | None, deps) -> None:
+        """Every name in `expr`: calls to `callee`, values to `value_name` (the common cases, a builtin
+        call and a binding's name, are settled inline: a file holds many of them)."""
+        bindings, fns = self.r.bindings, self.r.fns
         stack = [expr]
         while stack:
             node = stack.pop()
             kind = type(node)
             if kind is A.Call:
-                self.callee(node.func, deps)
+                func = node.func.id
+                if func in fns or func not in FUNCTIONS:
+                    self.callee(node.func, deps)
                 stack.extend(node.args)
-                stack.extend(e for _, e in node.kwargs)
+                for kwarg in node.kwargs:
+                    stack.append(kwarg[1])
             elif kind is A.Name:
-                self.value_name(node, scope, fn, deps)
+                if node.id in bindings and node.id not in scope:
+                    deps.append((node.id, node))
+                else:
+                    self.value_name(node, scope, fn, deps)
+            elif kind is A.BinOp:
+                stack.append(node.left)
+                stack.append(node.right)
+            elif kind is A.ListExpr:
+                stack.extend(node.items)
             elif kind not in _LEAVES:
                 stack.extend(A.children(node))
 

@@ -61,14 +61,14 @@ class ValueChecker:
         return True
 
     # ------------------------------------------------------------------------------- entry points
-    def check(self, name: str, call: A.Call, bound: dict, local: frozenset) -> T.Type | None:
-        """Check `call` of builtin `name`; returns a refined result type (a bspline over a 2-D net is a
-        curve2) or None."""
-        method = _RULES.get(name)
+    def check(self, name: str, call: A.Call, args: dict, local: frozenset) -> T.Type | None:
+        """Check `call` of builtin `name`, given its parameters' argument expressions (those given one
+        argument); returns a refined result type (a bspline over a 2-D net is a curve2) or None."""
+        method = RULES.get(name)
         if method is None:
             return None
         self.local = local
-        return method(self, {k: v[0].expr for k, v in bound.items() if len(v) == 1})
+        return method(self, args)
 
     def fraction(self, ann: str, key: str, expr) -> None:
         v = self.fold(expr)
@@ -302,4 +302,4 @@ class ValueChecker:
 
 
 #: builtin name -> its check (the method `_name` above), looked up once
-_RULES = {name: getattr(ValueChecker, "_" + name) for name in FUNCTIONS if hasattr(ValueChecker, "_" + name)}
+RULES = {name: getattr(ValueChecker, "_" + name) for name in FUNCTIONS if hasattr(ValueChecker, "_" + name)}
