@@ -51,6 +51,7 @@ class CheckResult:
 
 
 _NO_LOCALS: frozenset = frozenset()
+_NO_ENV: dict = {}      # the (never written) environment outside fns
 #: recursion limit for a second attempt on very deep expressions (about 4 frames per level)
 DEEP_LIMIT = 100_000
 ARITHMETIC = ("arithmetic: point - point = vec, point ± vec = point, vec ± vec, number × vec, vec / number, "
@@ -105,6 +106,7 @@ class _Checker:
         self.fn_results: dict[str, T.Type] = {}
         self.fn_sigs: dict[str, Signature] = {}
         self.calls: dict[tuple, tuple[T.Type, tuple]] = {}   # see `call`
+        self.fitting: set[tuple] = set()                      # see `annotations`
         self.folder = Folder(res.bindings, res.overrides, res.units, res.fns, self.types)
         self.values = ValueChecker(self.folder, self.diags.append)
 
@@ -129,10 +131,10 @@ class _Checker:
             return T.ANY
         self.busy.add(name)
         binding = self.res.bindings[name]
-        t = self.infer(binding.expr, {})
+        t = self.infer(binding.expr, _NO_ENV)
         override = self.res.overrides.get(name)
         if override is not None:
-            given = self.infer(override, {})
+            given = self.infer(override, _NO_ENV)
             if not T.accepts(t, given):
                 self.diags.append(error(
                     "E0116", f"`-D {name}`: param `{name}` is {T.describe(t)}, the value given is {T.describe(given)}",
@@ -170,17 +172,25 @@ class _Checker:
                                           "unknown", [f"known annotations: {', '.join('@' + a for a in ANNOTATIONS)}"],
                                           f"did you mean `@{near[0]}`?" if near else None))
                 for _k, e in ann.args:
-                    self.infer(e, {})
+                    self.infer(e, _NO_ENV)
                 continue
             sig = builtin.overloads[0]
-            bound = self.bind(ann.name, sig, [], [(k, e, self.infer(e, {})) for k, e in ann.args], ann.span,
-                              builtin.notes, annotation=True)
-            for key, args in bound.items():
-                param = sig.param(key)
-                expected = param.type if param else sig.extra
-                self.mismatch(ann.name, key, expected, args[0], builtin.notes, annotation=True)
-                if (ann.name, key) in FRACTIONS:
-                    self.values.fraction(ann.name, key, args[0].expr)
+            kwargs = [(k, e, self.infer(e, _NO_ENV)) for k, e in ann.args]
+            key = (ann.name, tuple((k, t) for k, _, t in kwargs))
+            if key in self.fitting:        # these fields with these types were found to fit
+                bound = {k: [Arg(e, t, None)] for k, e, t in kwargs}
+            else:
+                clean = len(self.diags)
+                bound = self.bind(ann.name, sig, [], kwargs, ann.span, builtin.notes, annotation=True)
+                for field_name, args in bound.items():
+                    param = sig.param(field_name)
+                    expected = param.type if param else sig.extra
+                    self.mismatch(ann.name, field_name, expected, args[0], builtin.notes, annotation=True)
+                if len(self.diags) == clean:
+                    self.fitting.add(key)
+            for field_name, args in bound.items():
+                if (ann.name, field_name) in FRACTIONS:
+                    self.values.fraction(ann.name, field_name, args[0].expr)
 
     # ------------------------------------------------------------------------------------ expressions
     def infer(self, expr, env: dict[str, T.Type]) -> T.Type:

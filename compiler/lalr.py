@@ -3,17 +3,19 @@
 lark computes the LALR(1) parse table of grammar/rgm.lark; lark's own parse loop, token objects,
 lexer classes and callback wrappers cost about 20 µs per token in CPython. This module uses the same
 table and the same tree-building callbacks (so it builds the same AST), at a fraction of the cost:
-  * one regex `findall` (a single C call) splits the text into (blanks, token) pairs; a token's kind
-    is looked up by its spelling, and lines and columns are counted along the way. A NAME that
-    spells a keyword (`units`, `param`, ...) becomes the keyword only where the table accepts it,
-    which is exactly what lark's contextual lexer does;
-  * the table is run once per *statement shape*, the sequence of token kinds up to its `;`: the run
-    (`_Shape`) turns the shifts and reductions into one Python expression of builder calls, which is
-    compiled and kept. Every later statement of that shape is built by calling it: no table look-ups,
-    no parse stack. Generated files repeat a few shapes thousands of times.
+  * one regex `findall` (a single C call) splits the text into (blanks, net, token) triples; a
+    token's kind is looked up by its spelling, and lines and columns are counted along the way. A
+    NAME that spells a keyword (`units`, `param`, ...) becomes the keyword only where the table
+    accepts it, which is exactly what lark's contextual lexer does;
+  * the table is run per *statement shape*, the sequence of token kinds up to its `;` (`run`). The
+    first statements of a shape are built while the table runs (`_Direct`); then the run is written
+    out as a Python function of the statement's tokens that makes the same builder calls in the same
+    order (`_Source`), compiled once and called for every later statement of that shape: no table
+    look-ups, no parse stack. Generated files repeat a few shapes thousands of times; a file whose
+    every statement differs costs about what a plain table-driven loop would.
 A reduction pops the rule's symbols, drops anonymous punctuation, splices `_helper` rules into their
 parent and passes `?rule` single children through, as lark's ChildFilter/ExpandSingleChild do, then
-calls the builder method named by the rule's alias or origin.
+calls the builder method named by the rule's alias or origin (`_Rule`).
 It does no error recovery: on the first unexpected character or token it returns False and the
 caller re-parses with lark's own parser, whose interactive state the recovery needs.
 """

@@ -193,17 +193,13 @@ def _read_chunk(piece: str, width: int | None) -> tuple[np.ndarray, int, int] | 
 _U64 = np.uint64
 _ALL, _BYTES, _HIGH = _U64(2**64 - 1), _U64(0x0101010101010101), _U64(0xF0F0F0F0F0F0F0F0)
 _ZEROS = _U64(0x3030303030303030)
+_TAIL = _U64(0x0807060504030201)
 #: by s = how many of a word's 8 bytes belong to the number (its top s bytes): the mask that keeps
 #: them, and '0' characters for the others
 _KEEP = np.array([(2**64 - 1) ^ (2**(64 - 8 * s) - 1) if s else 0 for s in range(9)], dtype=np.uint64)
 _FILL = np.array([0x3030303030303030 & (2**(64 - 8 * s) - 1) for s in range(9)], dtype=np.uint64)
 #: by c = bytes from the dot to the number's end (0: no dot): the value of one unit of the digits
 _SCALE = np.concatenate(([1.0], 10.0 ** np.arange(17)))
-
-
-def _bytesum(words: np.ndarray) -> np.ndarray:
-    """Sum of the 8 bytes of each word (each byte 0 or 1)."""
-    return (words * _BYTES) >> _U64(56)
 
 
 def _digits8(v: np.ndarray) -> np.ndarray:
@@ -230,30 +226,31 @@ def _decimals(raw: bytes, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | 
     every = np.ndarray((len(raw) - 7,), dtype="<u8", buffer=raw, strides=(1,))   # a word at every offset
     words, dots = [], []
     for k in range(nwords):                           # word k holds window bytes 8k .. 8k + 7
-        inside = np.clip(length - 8 * (nwords - 1 - k), 0, 8)
+        inside = np.clip(length - 8 * (nwords - 1 - k), 0, 8) if k < nwords - 1 else np.minimum(length, 8)
         w = (every[ends - 8 * (nwords - k)] & _KEEP.take(inside)) | _FILL.take(inside)
         words.append(w)
         dots.append((w.view(np.uint8) == ord(".")).view(np.uint64))    # 1 in each byte that is a dot
-    ndots = sum(_bytesum(d) for d in dots)
-    from_dot, seen = [], 0                            # 1 in each byte from the dot on
-    for d in dots:
-        d = d | seen
-        for shift in (8, 16, 32):
-            d |= d << _U64(shift)
-        from_dot.append(d)
-        seen = (d != 0) * _BYTES
-    c = sum(_bytesum(d) for d in from_dot)
+    # with one dot at byte j of a word: d * 0x0101.. has a 1 in each byte from j on (its top byte
+    # counts the word's dots), and the top byte of d * 0x0807..01 is 8 - j, the bytes from the dot on
+    after = [d * _BYTES for d in dots]
+    ndots = sum(a >> _U64(56) for a in after)
+    c = sum((d * _TAIL) >> _U64(56) for d in dots)
+    if nwords == 2:                                   # a dot in the first word: all of the second is after it
+        in_first = (after[0] >> _U64(56)) != 0
+        c += in_first * _U64(8)
+        after[1] |= in_first * _BYTES
     undotted = (ndots == 0) * _ALL
     mantissa, carry, bad = None, 0, (ndots > 1) | (length > 8 * nwords) | (length <= ndots)
-    for w, d, after in zip(words, dots, from_dot):
+    for w, d, a in zip(words, dots, after):
         v = (w ^ _ZEROS) & ~(d * _U64(255))            # digit values; the dot is 0, others keep high bits
         bad |= (v & _HIGH) != 0
-        keep = after * _U64(255) | undotted            # bytes from the dot on stay, the rest move up
+        keep = a * _U64(255) | undotted                # bytes from the dot on stay, the rest move up
         moved = v & ~keep
         v = (v & keep) | (moved << _U64(8)) | carry
         carry = moved >> _U64(56)
         mantissa = _digits8(v) if mantissa is None else mantissa * _U64(10**8) + _digits8(v)
-    bad |= mantissa > _U64(2**53)
+    if nwords == 2:                                   # 8 digits are always exact
+        bad |= mantissa > _U64(2**53)
     values = mantissa.view(np.int64) / _SCALE.take(c)   # int64 converts to float faster than uint64
     np.negative(values, where=negative, out=values)
     redo = np.flatnonzero(bad)

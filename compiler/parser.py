@@ -3,8 +3,8 @@
 The grammar (grammar/rgm.lark) is compiled by lark into LALR(1) tables (cached on disk by lark's
 `cache=True`, so a new process builds the parser in milliseconds). The AST is built *during* parsing
 by the callbacks of `_Builder`, so no parse tree is ever materialised, and a dense control net is one
-token handed to numpy (rgm.compiler.netbody). Valid text goes through a tight driver over lark's
-table (rgm.compiler.lalr, about twice as fast as lark's loop); text with a syntax error is parsed
+token handed to numpy (rgm.compiler.netbody). Valid text goes through a fast driver over lark's
+table (rgm.compiler.lalr, about five times as fast as lark's loop); text with a syntax error is parsed
 again by lark's own LALR parser with the contextual lexer (`transformer=` the same builder), whose
 interactive state the recovery below needs. Both build identical trees (tested).
 

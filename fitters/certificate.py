@@ -77,7 +77,7 @@ def _rz(p, axis_point, axis_dir):
 
 def _profile_segments(curve, axis_point, axis_dir):
     from rgm.fitters.profile2d import Segment
-    from rgm.model.objects import CircularArc, CompositeCurve, Line, Polyline
+    from rgm.model.objects import BSplineCurve, CircularArc, CompositeCurve, Line, Polyline
 
     if isinstance(curve, CompositeCurve):
         return [s for piece in curve.pieces for s in _profile_segments(piece, axis_point, axis_dir)]
@@ -96,6 +96,15 @@ def _profile_segments(curve, axis_point, axis_dir):
         c = _rz(curve.center, axis_point, axis_dir)
         return [Segment(_rz(curve.start_point, axis_point, axis_dir), _rz(curve.end_point, axis_point, axis_dir),
                         c, float(curve.radius), _rz(mid, axis_point, axis_dir))]
+    if isinstance(curve, BSplineCurve) and not curve.nurbs().is_rational:
+        # control points in the meridian plane's own (signed r, z) coordinates: an affine map, so exact
+        nurbs = curve.nurbs()
+        ctrl = np.asarray(nurbs.ctrl, float) - axis_point
+        z = ctrl @ axis_dir
+        across = ctrl - np.outer(z, axis_dir)
+        e = across.mean(axis=0) / np.linalg.norm(across.mean(axis=0))
+        rz = np.column_stack([across @ e, z])
+        return [Segment(rz[0], rz[-1], ctrl=rz, knots=np.asarray(nurbs.knots, float))]
     raise ValueError(f"cannot measure a profile made of {type(curve).__name__}")
 
 

@@ -11,8 +11,11 @@ certificate is measured on exactly the model the file describes.
 Revolutions (the paper's pin, Figure 7): profile in the part's x-y plane (x = radius, y = along the axis
 from 0 to `length`), revolved about the y axis.  Named dimensions: `radius` (the longest axis-parallel
 line), `length` (the profile's extent along the axis), `chamfer` (45-degree lines joining the radius
-to an end face, when all are equal) and, per rectangular groove k, `groovek_at`, `groovek_width` and
-`groovek_depth`; other vertex coordinates are written as numbers.
+to an end face, when all are equal), `fillet` (quarter-circle arcs tangent to an axis-parallel and a
+radial face; `fillet1`, ... when they differ) and, per rectangular groove k, `groovek_at`, `groovek_width`
+and `groovek_depth`; other coordinates are written as numbers.  Arcs are `arc(start, through, end)`;
+free-form stretches are `bspline(degree: 3, knots: knots([...]), points: [...])` pieces of the `profile`,
+their end control points the chain's vertices.
 Boxes: a rectangle `base` in the part's x-y plane extruded along z by `height`, with trimmed planes as
 bottom and top, as one `shell`; named dimensions `width` (x), `depth` (y), `height` (z).
 """
@@ -102,7 +105,46 @@ def _revolution_dims(profile: Profile, suffix: str, snap: float):
         c = dims.add("chamfer" + suffix, np.mean(chamfers))
         r_cands.append((f"radius{suffix} - chamfer{suffix}", round(radius - c, _DEC)))
         z_cands += [(f"chamfer{suffix}", c), (f"length{suffix} - chamfer{suffix}", round(length - c, _DEC))]
+    _fillet_dims(segs, dims, suffix, r_cands, z_cands)
     return dims, r_cands, z_cands
+
+
+_K45 = 1 - np.sqrt(0.5)  # a quarter circle's midpoint sits this fraction of its radius in from the corner
+
+
+def _fillet_dims(segs, dims, suffix, r_cands, z_cands):
+    """Named fillets: quarter-circle arcs whose ends meet an axis-parallel and a radial face (the tangent
+    directions at the ends are the axis directions) at a corner whose coordinates are already named
+    (`radius`, `0`, `length`, ...).  One `fillet` when all radii agree within snap, else `fillet1`, ...;
+    the arcs' ends and midpoints become expressions of it (`radius - fillet`, `0.29289322 * fillet`)."""
+    found = []
+    for s in segs:
+        if s.kind != "arc":
+            continue
+        legs = np.abs(np.array([s.p0 - s.center, s.p1 - s.center]))
+        if not (np.all(np.abs(np.sort(legs, axis=1)[:, 0]) <= dims.snap) and np.all(np.abs(legs.max(axis=1) - s.radius) <= dims.snap)
+                and np.argmax(legs[0]) != np.argmax(legs[1])):
+            continue
+        corner = s.center + np.sign(s.through - s.center) * s.radius
+        rx, zx = (next((t for t, v in cands if abs(v - x) <= dims.snap), None)
+                  for x, cands in ((corner[0], r_cands), (corner[1], z_cands)))
+        if rx is not None and zx is not None:
+            found.append((s, corner, rx, zx))
+    if not found:
+        return
+    one = np.ptp([s.radius for s, *_ in found]) <= dims.snap
+    if one:
+        dims.add("fillet" + suffix, np.mean([s.radius for s, *_ in found]))
+    for k, (s, corner, rx, zx) in enumerate(found, 1):
+        name = f"fillet{suffix}" if one else f"fillet{k}{suffix}"
+        f = dict(dims.named)[name] if one else dims.add(name, s.radius)
+        sr, sz = np.sign(s.center - corner)
+        for frac, text in ((1.0, name), (_K45, f"{_K45:.8f} * {name}")):
+            for corner_x, expr, sign, cands in ((corner[0], rx, sr, r_cands), (corner[1], zx, sz, z_cands)):
+                value = round(round(float(corner_x), _DEC) + sign * frac * f, _DEC)
+                op = "+" if sign > 0 else "-"
+                cands.insert(0, (text if expr == "0" and sign > 0 else f"{expr} {op} {text}", value))
+
 
 
 def _grooves(segs, radius, snap):
@@ -135,10 +177,17 @@ def _revolution_part(fit: RevolutionFit, name: str, suffix: str, snap: float) ->
         if seg.kind == "line":
             pieces.append(f"line({t0}, {t1})")
             ideal.append(Segment(v0, v1))
-        else:
-            tm = np.round(seg.through, _DEC)
-            pieces.append(f"arc({t0}, pt({_num(tm[0])}, {_num(tm[1])}, 0), {t1})")
-            ideal.append(_arc_segment(v0, tm, v1))
+        elif seg.kind == "arc":
+            tm, vm = point(seg.through)
+            pieces.append(f"arc({t0}, {tm}, {t1})")
+            ideal.append(_arc_segment(v0, vm, v1))
+        else:  # a B-spline stretch: its end points are the chain's vertices
+            inner = [point(c) for c in seg.ctrl[1:-1]]
+            knots = [_knot(u) for u in seg.knots]
+            pieces.append(f"bspline(degree: {len(seg.knots) - len(seg.ctrl) - 1}, knots: knots([{', '.join(knots)}]), "
+                          f"points: [{', '.join([t0] + [t for t, _ in inner] + [t1])}])")
+            ideal.append(Segment(v0, v1, ctrl=np.array([v0] + [v for _, v in inner] + [v1]),
+                                 knots=np.array([float(u) for u in knots])))
         exprs.append(t0)
     exprs.append(vtext[-1][0])
     if all(s.kind == "line" for s in fit.profile.segments):
@@ -153,6 +202,11 @@ def _revolution_part(fit: RevolutionFit, name: str, suffix: str, snap: float) ->
     frame, placed = _placement(fit.frame, body)
     return EmittedPart(name, params, bindings + [f"{name} := {placed};"], body,
                        RevolutionFit(frame, Profile(tuple(ideal)), fit.sigma))
+
+
+def _knot(u: float) -> str:
+    """A knot value in [0, 1] as written (10 decimals at most; knot insertion gives dyadic fractions)."""
+    return f"{round(float(u), 10) + 0.0:.10f}".rstrip("0").rstrip(".") or "0"
 
 
 def _arc_segment(p0, through, p1):

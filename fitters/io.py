@@ -8,7 +8,8 @@ Formats
   exactly rows*cols vertices, NaN = no sample).  A `face` element is kept as triangles.
 - XYZ / PTS / TXT / CSV text: one point per line, the first three columns are x y z (a PTS point-count
   line is skipped).
-- OBJ, STL, OFF, GLB: through trimesh, imported lazily (only these formats load it).
+- OBJ, STL, OFF, GLB: through trimesh, imported lazily (only these formats load it); vertices at the
+  same position (STL repeats every face's corners) become one point.
 - Range grids: ``.npy`` (depth (rows, cols) or xyz (rows, cols, 3)), ``.npz`` (arrays ``depth`` or ``xyz``
   and optional ``mask``) and ``.grid`` text (one image row per line, ``nan`` = invalid pixel).  A depth
   image lives on a square pixel lattice of pitch `pitch`: point (col*pitch, row*pitch, depth), seen by an
@@ -302,14 +303,41 @@ def _ply_binary(body: bytes, elements, endian, name):
             out[el_name] = {prop: (np.full(count, first, np.int64), fixed["v"].astype(np.int64).ravel())}
             pos += dt.itemsize * count
             continue
-        counts, values = np.empty(count, np.int64), []
-        for i in range(count):  # variable-length lists: rare, walked once
-            k = counts[i] = int(np.frombuffer(body, ct, 1, pos)[0])
-            pos += ct.itemsize
-            values.append(np.frombuffer(body, it, k, pos).astype(np.int64))
-            pos += it.itemsize * k
-        out[el_name] = {prop: (counts, np.concatenate(values) if values else np.zeros(0, np.int64))}
+        counts, values, pos = _ragged_binary(body, pos, count, ct, it, el_name, name)
+        out[el_name] = {prop: (counts, values)}
     return out
+
+
+def _ragged_binary(body: bytes, pos: int, count: int, ct: np.dtype, it: np.dtype, el_name, name):
+    """`count` binary lists `k v1 .. vk` (count type ct, item type it) from body[pos:], vectorised:
+    every byte offset gets the offset of the record that would follow a record starting there, and
+    pointer doubling (Wyllie 1979) walks the chain from pos in log2(count) passes.
+    Returns (counts (count,), values (sum k,) int64, the offset after the last list)."""
+    buf = np.frombuffer(body, np.uint8, offset=pos)
+    cs, size = ct.itemsize, it.itemsize
+    L = len(buf)
+    if count == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), pos
+    if L < cs:
+        raise ScanError(f"{name}: file ends inside element `{el_name}`")
+    k_at = np.lib.stride_tricks.sliding_window_view(buf, cs).copy().view(ct)[:, 0].astype(np.int64)
+    jump = np.full(L + 1, L, np.int64)                          # offset L: past the end (absorbing)
+    jump[:len(k_at)] = np.minimum(np.arange(len(k_at)) + cs + size * np.maximum(k_at, 0), L)
+    starts, m = np.zeros(1, np.int64), 1
+    while m < count:                                            # starts of records 0 .. 2m-1
+        starts = np.concatenate([starts, jump[starts]])
+        jump, m = jump[jump], 2 * m
+    starts = starts[:count]
+    if starts[-1] > L - cs or (k_at[starts] < 0).any():
+        raise ScanError(f"{name}: file ends inside element `{el_name}`")
+    counts = k_at[starts]
+    end = int(starts[-1] + cs + size * counts[-1])
+    if end > L:
+        raise ScanError(f"{name}: file ends inside element `{el_name}`")
+    first = np.repeat(starts + cs, counts)
+    offsets = first + size * (np.arange(len(first)) - np.repeat(np.cumsum(counts) - counts, counts))
+    values = buf[offsets[:, None] + np.arange(size)].copy().view(it)[:, 0].astype(np.int64)
+    return counts, values, pos + end
 
 
 def read_ply(path) -> Scan:
@@ -396,7 +424,16 @@ def _read_mesh(path: Path) -> Scan:
         mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as exc:  # trimesh raises many types for bad files
         raise ScanError(f"{name}: cannot read mesh ({exc})") from None
-    return _finish(Scan(np.asarray(mesh.vertices, float), faces=np.asarray(mesh.faces, np.int64), source=name))
+    vertices, faces = np.asarray(mesh.vertices, float), np.asarray(mesh.faces, np.int64)
+    if not len(vertices):
+        return _finish(Scan(vertices.reshape(0, 3), source=name))
+    # STL stores every face's corners (and OBJ seams repeat them): one point per position, faces remapped,
+    # in the order of first appearance
+    _, first, inverse = np.unique(vertices, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return _finish(Scan(vertices[first[order]], faces=rank[inverse.ravel()][faces], source=name))
 
 
 def scan_from_depth(depth, mask=None, pitch: float = 1.0, source: str = "<memory>") -> Scan:

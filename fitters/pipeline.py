@@ -100,7 +100,7 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
         name = f"{title}{suffix}"
         pts = points[idx]
         with stages("classify"):
-            cls = classify(superellipsoid=se)
+            cls = classify(pts, superellipsoid=se)
         entry = {"name": name, "points": int(len(pts)), "category": cls.category,
                  "confidence": cls.confidence, "runner_up": cls.runner_up, "scores": cls.scores,
                  "superellipsoid": {"size": cls.superellipsoid.size.tolist(), "eps": cls.superellipsoid.eps.tolist(),

@@ -12,7 +12,8 @@
    mantle (normal across the axis) must have one r per z-slab and points of the ends (normal along the
    axis) one z per r-slab; the four axis parameters are adjusted (scipy least_squares, soft_l1) to shrink
    the deviation from the slab means.
-3. The profile (r, z) is fitted by lines and circular arcs (`rgm.fitters.profile2d`).
+3. The profile (r, z) is fitted by lines, circular arcs (tangent where the part is smooth) and, where no
+   conic holds, B-splines refined by knot insertion (`rgm.fitters.profile2d`).
 
 The part frame: origin on the axis at the profile's lowest z, the axis as the frame's y axis (the paper's
 pin, Figure 7: profile in the x-y plane, revolved about y), x along the first principal direction of the
@@ -27,6 +28,7 @@ from scipy.optimize import least_squares
 
 from rgm.errors import GeometryError
 from rgm.fitters.profile2d import Profile, fit_conic_profile
+from rgm.fitters.profile_spline import noise_sigma
 
 __all__ = ["axis_from_normals", "refine_axis", "profile_coordinates", "RevolutionFit", "fit_revolution"]
 
@@ -81,8 +83,9 @@ def _slab_residuals(key, value, bins):
 
 def refine_axis(points, normals, axis_point, axis_dir, *, bins: int = 60, max_points: int = 8000, seed: int = 0):
     """Refine an axis by minimising the profile's spread (module docstring, step 2), on at most
-    `max_points` points (fixed-seed subsample).  Returns (point, direction, robust sigma of the spread
-    residuals)."""
+    `max_points` points (fixed-seed subsample).  Returns (point, direction, noise sigma of the profile
+    (mm): from differences of consecutive r along z on the mantle and of z along r on the ends, which
+    cancel the profile's own shape, `profile_spline.noise_sigma`))."""
     if len(points) > max_points:
         keep = np.random.default_rng(seed).choice(len(points), max_points, replace=False)
         points, normals = points[keep], normals[keep]
@@ -110,8 +113,9 @@ def refine_axis(points, normals, axis_point, axis_dir, *, bins: int = 60, max_po
     sol = least_squares(residuals, np.zeros(4), loss="soft_l1", f_scale=f_scale, diff_step=1e-6,
                         x_scale=np.r_[1e-2, 1e-2, f_scale * 10, f_scale * 10], max_nfev=60)
     p, d = axis_of(sol.x)
-    sigma = 1.4826 * np.median(np.abs(sol.fun))
-    return p, d, float(sigma)
+    rz = profile_coordinates(points, p, d)
+    along = [rz[mantle][np.argsort(rz[mantle, 1]), 0], rz[ends][np.argsort(rz[ends, 0]), 1]]
+    return p, d, noise_sigma(*(a for a in along if len(a) > 10))
 
 
 @dataclass(frozen=True)
@@ -128,32 +132,37 @@ class RevolutionFit:
         return self.profile.distance(profile_coordinates(points, self.frame[:3, 3], self.frame[:3, 1]))
 
 
-def fit_revolution(points, normals, *, tol: float, axis_hint=None, seed: int = 0,
-                   profile_points=None) -> RevolutionFit:
-    """Fit a surface of revolution with a conic-section profile to points and unit normals (n, 3).
+def fit_revolution(points, normals, *, tol: float, statistic: str = "p95", axis_hint=None, seed: int = 0,
+                   profile_points=None, max_profile_points: int = 40000) -> RevolutionFit:
+    """Fit a surface of revolution with a profile of lines, arcs and B-spline stretches to points and unit
+    normals (n, 3) (mm).
 
     The axis comes from `points` and `normals` (a subsample is enough); the profile from
-    `profile_points` (m, 3) (default: `points`).
+    `profile_points` (m, 3) (default: `points`), at most `max_profile_points` of them (a fixed-seed
+    subsample: faces are fitted to many thousand points either way; the certificate measures all).
 
-    axis_hint : optional unit vector (e.g. a superellipsoid's symmetry axis) used if the normals are
-    degenerate (all normals meet many lines, as on a sphere).  tol : the requested tolerance; the
-    inlier threshold of the profile segmentation is max(3 sigma, tol / 4).
+    axis_hint : optional unit vector (e.g. a superellipsoid's symmetry axis), tried as well when it differs
+    from the axis of the normals (which is degenerate on a sphere: all normals meet many lines); the
+    axis whose profile spreads least is kept.  tol : the requested tolerance (mm) on the
+    certificate's `statistic` ("max", "p99", "p95"), to which B-spline stretches are refined; the inlier
+    threshold of the profile segmentation is max(3 sigma, tol / 4).
     """
     points, normals = np.asarray(points, float), np.asarray(normals, float)
     if len(points) < 50:
         raise GeometryError(f"a surface of revolution needs at least 50 points, got {len(points)}")
-    p, d = axis_from_normals(points, normals)
-    if axis_hint is not None and abs(d @ axis_hint) < 0.9:
-        d = _unit(np.asarray(axis_hint, float))
-        p = points.mean(axis=0)
-    p, d, sigma = refine_axis(points, normals, p, d)
+    starts = [axis_from_normals(points, normals)]
+    if axis_hint is not None and abs(starts[0][1] @ axis_hint) < 0.9:
+        starts.append((points.mean(axis=0), _unit(np.asarray(axis_hint, float))))
+    p, d, sigma = min((refine_axis(points, normals, *start) for start in starts), key=lambda fit: fit[2])
     d = d if d[np.argmax(np.abs(d))] > 0 else -d         # canonical: the axis' largest component positive
     rz = profile_coordinates(points if profile_points is None else np.asarray(profile_points, float), p, d)
+    if len(rz) > max_profile_points:
+        rz = rz[np.random.default_rng(seed).choice(len(rz), max_profile_points, replace=False)]
     thr = max(3.0 * sigma, tol / 4.0, 1e-9 * np.ptp(rz))
-    profile = fit_conic_profile(rz, thr=thr, seed=seed)
+    profile = fit_conic_profile(rz, thr=thr, tol=tol, statistic=statistic, seed=seed)
     # part frame: origin at the lowest profile z on the axis, y = axis
     z0 = float(profile.vertices[:, 1].min())
-    shifted = Profile(tuple(_shift(s, z0) for s in profile.segments))
+    shifted = Profile(tuple(s.shifted(np.array([0.0, -z0])) for s in profile.segments))
     e = np.eye(3)[0] if abs(d[0]) < 0.9 else np.eye(3)[2]  # frame x: world x (or z) made normal to the axis
     x = _unit(e - (e @ d) * d)
     frame = np.eye(4)
@@ -161,32 +170,10 @@ def fit_revolution(points, normals, *, tol: float, axis_hint=None, seed: int = 0
     return RevolutionFit(frame, shifted, sigma)
 
 
-def _shift(seg, z0):
-    off = np.array([0.0, z0])
-    from dataclasses import replace
-
-    return replace(seg, p0=seg.p0 - off, p1=seg.p1 - off,
-                   center=None if seg.center is None else seg.center - off,
-                   through=None if seg.through is None else seg.through - off)
-
-
 def sample_revolution(profile: Profile, frame, spacing: float) -> np.ndarray:
     """(m, 3) points on the surface of revolution of `profile` in the part frame `frame` (4, 4) (profile
     r along frame x, z along frame y), about `spacing` apart (for coverage)."""
-    rz = []
-    for seg in profile.segments:
-        if seg.kind == "line":
-            k = max(2, int(np.linalg.norm(seg.p1 - seg.p0) / spacing) + 1)
-            rz.append(seg.p0 + np.linspace(0, 1, k)[:, None] * (seg.p1 - seg.p0))
-        else:
-            a0, a1, am = (np.arctan2(*(p - seg.center)[::-1]) for p in (seg.p0, seg.p1, seg.through))
-            span = (a1 - a0) % (2 * np.pi)
-            if (am - a0) % (2 * np.pi) > span:
-                span -= 2 * np.pi
-            k = max(3, int(abs(span) * seg.radius / spacing) + 1)
-            ang = a0 + np.linspace(0, 1, k) * span
-            rz.append(seg.center + seg.radius * np.column_stack([np.cos(ang), np.sin(ang)]))
-    rz = np.vstack(rz)
+    rz = np.vstack([seg.sample(spacing) for seg in profile.segments])
     counts = np.maximum(8, (2 * np.pi * rz[:, 0] / spacing).astype(int))
     idx = np.repeat(np.arange(len(rz)), counts)
     phi = 2 * np.pi * (np.arange(len(idx)) - np.repeat(np.cumsum(counts) - counts, counts)) / counts[idx]

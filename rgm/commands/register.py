@@ -2,8 +2,9 @@
 
 Reads the views (scan files, or one Stanford .conf), removes outliers (RLTS filter on range images,
 statistical removal on clouds; --no-filter to skip), registers every view incrementally against the
-views placed so far (coarse search when no pose is known, then robust point-to-plane ICP), refines all
-poses once more against each other, and writes the merged cloud in the first view's frame.  A table on
+views placed so far (coarse search when no pose is known, then robust point-to-plane ICP; views that fail
+are tried again once the model has grown), refines all poses together (simultaneous point-to-plane least
+squares, the first view fixed), and writes the merged cloud in the first view's frame.  A table on
 stdout gives each view's status; views that are not to be trusted (low overlap, an unconstrained
 direction, a residual far above the noise) are named on stderr.  Exit codes: 0 written, 1 bad input or
 (with --strict) an untrusted view, 2 usage.
@@ -27,7 +28,7 @@ def add_arguments(parser) -> None:
     parser.add_argument("--report", metavar="reg.json", help="per-view transforms, residuals and statuses")
     parser.add_argument("--poses-out", metavar="out.conf", help="write the registered poses as a .conf")
     parser.add_argument("--no-filter", action="store_true", help="register the raw points (no outlier removal)")
-    parser.add_argument("--no-refine", action="store_true", help="skip the global refinement pass")
+    parser.add_argument("--no-refine", action="store_true", help="skip the global refinement of all poses")
     parser.add_argument("--strict", action="store_true", help="exit 1 if any view is not to be trusted")
     parser.add_argument("--force", action="store_true", help="overwrite existing output files")
 

@@ -20,6 +20,34 @@ def pin_profile(radius=PIN_RADIUS, length=PIN_LENGTH, chamfer=0.0):
     return np.array([[0, 0], [radius, 0], [radius, length], [0, length]], float)
 
 
+def turned_profile(radius=PIN_RADIUS, length=PIN_LENGTH, *, fillet=0.0, bump=None, arc_step=np.radians(3.0),
+                   bump_step=0.5):
+    """(k, 2) (r, z) polyline, axis to axis, of a pin with quarter-circle fillets of radius `fillet` (mm) at
+    both end edges and, with bump = (z0, z1, height), a smooth bulge of the mantle between z0 and z1:
+    r = radius + 16 height u^2 (1 - u)^2, u = (z - z0) / (z1 - z0) (a quartic: not a conic, tangent to
+    the mantle at both ends).  Curves are sampled as chords (`arc_step` radians on the fillets,
+    `bump_step` mm along z on the bulge): their sagitta (fillet (1 - cos(arc_step / 2)): 1.4e-3 mm on a 4 mm
+    fillet by default; 32 height bump_step^2 / (8 (z1 - z0)^2) on the bulge: 2.4e-3 mm for 6 mm over 50 mm)
+    is the truth's own error."""
+    pts = [[0.0, 0.0]]
+    if fillet:
+        a = np.linspace(-np.pi / 2, 0.0, max(2, int(np.ceil(np.pi / 2 / arc_step)) + 1))
+        pts += list(np.column_stack([radius - fillet + fillet * np.cos(a), fillet + fillet * np.sin(a)]))
+    else:
+        pts.append([radius, 0.0])
+    if bump is not None:
+        z0, z1, height = bump
+        u = np.linspace(0.0, 1.0, max(3, int(np.ceil((z1 - z0) / bump_step)) + 1))
+        pts += list(np.column_stack([radius + 16 * height * u ** 2 * (1 - u) ** 2, z0 + u * (z1 - z0)]))
+    if fillet:
+        a = np.linspace(0.0, np.pi / 2, max(2, int(np.ceil(np.pi / 2 / arc_step)) + 1))
+        pts += list(np.column_stack([radius - fillet + fillet * np.cos(a), length - fillet + fillet * np.sin(a)]))
+    else:
+        pts.append([radius, length])
+    pts.append([0.0, length])
+    return np.array(pts, float)
+
+
 def raycast_revolved(profile, origins, dirs):
     """First hits (m,) t (inf = miss) of rays o + t d (m, 3) with the surface made by revolving the (r, z)
     polyline `profile` about the y axis (z of the profile = world y)."""

@@ -17,7 +17,9 @@ SHARED = Path("/work/shared/data")
 
 def test_bunny_copy_range_grid_and_poses():
     views = read_conf(BUNNY / "bun.conf")
-    assert [Path(v.source).name for v in views] == ["bun000.ply", "bun045.ply", "bun090.ply"]
+    assert [Path(v.source).name for v in views] == ["bun000.ply", "bun045.ply", "bun090.ply", "bun180.ply",
+                                                    "bun270.ply", "top2.ply", "top3.ply", "bun315.ply",
+                                                    "chin.ply", "ear_back.ply"]
     v0 = views[0]
     assert v0.grid.shape == (100, 128)
     valid = v0.grid >= 0
@@ -31,6 +33,41 @@ def test_bunny_copy_range_grid_and_poses():
     # bun090 is a ~90 degree turn about y
     angle = np.degrees(np.arccos((np.trace(views[2].pose[:3, :3]) - 1) / 2))
     assert abs(angle - 90) < 1.0
+
+
+@pytest.mark.skipif(not (SHARED / "stanford-bunny").exists(), reason="shared data not present")
+def test_binary_bunny_copies_match_the_originals():
+    """The binary copies (bun180 ...) hold exactly every 4th row and column of the original ASCII views."""
+    for name in ("bun180.ply", "ear_back.ply"):
+        copy = read_scan(BUNNY / name)
+        original = read_scan(SHARED / "stanford-bunny" / name).decimate(4)
+        assert b"binary_little_endian" in (BUNNY / name).read_bytes()[:100]
+        assert np.array_equal(copy.grid, original.grid)
+        assert np.allclose(copy.points, original.points, atol=1e-7)
+        assert np.array_equal(copy.view_dir, original.view_dir)
+
+
+def test_binary_lists_of_any_length(tmp_path):
+    """Binary PLY lists of mixed lengths (triangles and quads; a range grid's empty and one-index cells) are
+    read vectorised: triangles kept, other polygons skipped, grid cells in place; truncation refused."""
+    pts = np.arange(18, dtype="<f4").reshape(6, 3)
+    polys = [[0, 1, 2], [1, 2, 3, 4], [3, 4, 5], [], [0, 5, 1]]
+    head = ("ply\nformat binary_little_endian 1.0\nelement vertex 6\nproperty float x\nproperty float y\n"
+            "property float z\nelement face 5\nproperty list uchar int vertex_indices\nend_header\n").encode()
+    body = b"".join(bytes([len(f)]) + np.array(f, "<i4").tobytes() for f in polys)
+    (tmp_path / "m.ply").write_bytes(head + pts.tobytes() + body)
+    assert read_scan(tmp_path / "m.ply").faces.tolist() == [[0, 1, 2], [3, 4, 5], [0, 5, 1]]
+    (tmp_path / "cut.ply").write_bytes(head + pts.tobytes() + body[:-3])
+    with pytest.raises(ScanError, match="cut.ply: file ends inside element `face`"):
+        read_scan(tmp_path / "cut.ply")
+    grid = [-1, 0, 1, -1, 2, -1]
+    head = ("ply\nformat binary_big_endian 1.0\nobj_info num_cols 3\nobj_info num_rows 2\nelement vertex 3\n"
+            "property float x\nproperty float y\nproperty float z\nelement range_grid 6\n"
+            "property list uchar int vertex_indices\nend_header\n").encode()
+    body = b"".join(b"\x00" if g < 0 else b"\x01" + np.array([g], ">i4").tobytes() for g in grid)
+    (tmp_path / "g.ply").write_bytes(head + pts[:3].astype(">f4").tobytes() + body)
+    scan = read_scan(tmp_path / "g.ply")
+    assert scan.grid.tolist() == [[-1, 0, 1], [-1, 2, -1]] and np.allclose(scan.points, pts[:3])
 
 
 @pytest.mark.skipif(not (SHARED / "pcl").exists(), reason="shared data not present")
@@ -154,3 +191,27 @@ def test_mesh_formats_through_trimesh(tmp_path):
     scan = read_scan(tmp_path / "t.obj")
     assert scan.n == 3 and scan.faces.tolist() == [[0, 1, 2]]
     assert isinstance(scan, Scan)
+
+
+def test_stl_ascii_and_binary(tmp_path):
+    """STL through trimesh: a tetrahedron written by hand as ASCII and as binary STL (the binary one
+    written with numpy: 80-byte header, count, 50-byte records); corners shared by faces come back once
+    (trimesh merges STL's per-face vertices) and every face uses the right corners."""
+    corners = np.array([[0, 0, 0], [10, 0, 0], [0, 20, 0], [0, 0, 30]], float)
+    tris = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    lines = ["solid tet"]
+    for t in tris:
+        lines += ["facet normal 0 0 0", "outer loop"] + [f"vertex {x} {y} {z}" for x, y, z in corners[t]]
+        lines += ["endloop", "endfacet"]
+    (tmp_path / "a.stl").write_text("\n".join(lines + ["endsolid tet"]) + "\n")
+    rec = np.zeros(len(tris), np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("attr", "<u2")]))
+    rec["v"] = corners[tris]
+    (tmp_path / "b.stl").write_bytes(b"\0" * 80 + np.uint32(len(tris)).tobytes() + rec.tobytes())
+    for name in ("a.stl", "b.stl"):
+        scan = read_scan(tmp_path / name)
+        assert scan.n == 4 and len(scan.faces) == 4
+        got = {tuple(sorted(map(tuple, scan.points[f]))) for f in scan.faces}
+        assert got == {tuple(sorted(map(tuple, corners[t]))) for t in tris}
+    (tmp_path / "bad.stl").write_bytes(b"\0" * 80 + np.uint32(0).tobytes())
+    with pytest.raises(ScanError, match="bad.stl"):
+        read_scan(tmp_path / "bad.stl")
