@@ -122,8 +122,9 @@ def _fillet_dims(segs, dims, suffix, r_cands, z_cands):
         if s.kind != "arc":
             continue
         legs = np.abs(np.array([s.p0 - s.center, s.p1 - s.center]))
-        if not (np.all(np.abs(np.sort(legs, axis=1)[:, 0]) <= dims.snap) and np.all(np.abs(legs.max(axis=1) - s.radius) <= dims.snap)
-                and np.argmax(legs[0]) != np.argmax(legs[1])):
+        axial = np.all(np.sort(legs, axis=1)[:, 0] <= dims.snap)           # each end straight off the centre
+        quarter = np.all(np.abs(legs.max(axis=1) - s.radius) <= dims.snap) and np.argmax(legs[0]) != np.argmax(legs[1])
+        if not (axial and quarter):
             continue
         corner = s.center + np.sign(s.through - s.center) * s.radius
         rx, zx = (next((t for t, v in cands if abs(v - x) <= dims.snap), None)
