@@ -259,28 +259,31 @@ class _Checker:
 
     # ------------------------------------------------------------------------------------ calls
     def call(self, call: A.Call, env) -> T.Type:
-        args = [(e, self.infer(e, env)) for e in call.args]
-        kwargs = [(k, e, self.infer(e, env)) for k, e in call.kwargs]
+        arg_types = tuple([self.infer(e, env) for e in call.args])
+        kw_types = tuple([(k, self.infer(e, env)) for k, e in call.kwargs])
         name = call.func.id
-        if name in self.res.fns:
-            sig = self.fn_signature(name)
-            bound = self.bind(name, sig, args, kwargs, call.span, (str(sig),))
-            for pname, bargs in bound.items():
-                self.mismatch(name, pname, sig.param(pname).type, bargs[0], (str(sig),))
-            return self.fn_result(name)
-        builtin = FUNCTIONS.get(name)
-        if builtin is None:
+        user = name in self.res.fns
+        builtin = None if user else FUNCTIONS.get(name)
+        if not user and builtin is None:
             return T.ANY   # reported by resolve
-        # calls with the same argument types bind the same way: the outcome is looked up once
-        key = (name, tuple(t for _, t in args), tuple((k, t) for k, _, t in kwargs))
-        known = self.calls.get(key)
+        # calls of a builtin with the same argument types bind the same way: looked up once
+        key = (name, arg_types, kw_types)
+        known = None if user else self.calls.get(key)
         if known is None:
+            args = list(zip(call.args, arg_types))
+            kwargs = [(k, e, t) for (k, e), (_, t) in zip(call.kwargs, kw_types)]
+            if user:
+                sig = self.fn_signature(name)
+                bound = self.bind(name, sig, args, kwargs, call.span, (str(sig),))
+                for pname, bargs in bound.items():
+                    self.mismatch(name, pname, sig.param(pname).type, bargs[0], (str(sig),))
+                return self.fn_result(name)
             known = self.overload(name, builtin, args, kwargs, call.span)
             if known[1] is not None:
                 self.calls[key] = known
         result, slots = known
         if slots is not None and name in VALUE_RULES:   # value checks only on calls whose arguments fit
-            exprs = [e for e, _ in args] + [e for _, e, _ in kwargs]
+            exprs = [*call.args, *[e for _, e in call.kwargs]]
             local = frozenset(env) if env else _NO_LOCALS
             result = self.values.check(name, call, {p: exprs[i] for p, i in slots}, local) or result
         return result

@@ -141,8 +141,8 @@ class _Builder(Transformer):
     # -- spans
     def _span(self, first, last) -> Span:
         """From the start of `first` to the end of `last`, each a token or a node."""
-        a = first if first.__class__ is Tok else _position(first)
-        b = last if last.__class__ is Tok else _position(last)
+        a = first if first.__class__ is Tok else first.span if first.__class__ is not Token else Tok.from_lark(first)
+        b = last if last.__class__ is Tok else last.span if last.__class__ is not Token else Tok.from_lark(last)
         return _SPAN(self.run.filename, a.line, a.col, b.end_line, b.end_col, a.start_pos, b.end_pos)
 
     def _token_span(self, tok) -> Span:
@@ -289,11 +289,6 @@ def fast_parser() -> FastLALR:
     if _FAST is None:
         _FAST = FastLALR(lark_parser(), _BUILDER)
     return _FAST
-
-
-def _position(x):
-    """Something with Span's position fields: a node's span, or a lark Token converted."""
-    return Tok.from_lark(x) if x.__class__ is Token else x.span
 
 
 def _on_comment(tok: Token):

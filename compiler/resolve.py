@@ -225,17 +225,18 @@ class _Resolver:
     def order(self) -> None:
         """Tarjan's strongly connected components over bindings and fns; a component of several nodes
         (or a node using itself) is a cycle. Components come out dependencies first, which is the order."""
+        deps_of = self.r.deps
         index: dict[str, int] = {}
         low: dict[str, int] = {}
         on_stack: set[str] = set()
         stack: list[str] = []
-        source_order = list(self.r.deps)
+        source_order = list(deps_of)
         components: list[list[str]] = []
 
         for root in source_order:
             if root in index:
                 continue
-            work = [(root, iter(self.r.deps[root]))]
+            work = [(root, iter(deps_of[root]))]
             index[root] = low[root] = len(index)
             stack.append(root)
             on_stack.add(root)
@@ -247,17 +248,22 @@ class _Resolver:
                         index[dep] = low[dep] = len(index)
                         stack.append(dep)
                         on_stack.add(dep)
-                        work.append((dep, iter(self.r.deps[dep])))
+                        work.append((dep, iter(deps_of[dep])))
                         advanced = True
                         break
-                    if dep in on_stack:
-                        low[node] = min(low[node], index[dep])
+                    if dep in on_stack and index[dep] < low[node]:
+                        low[node] = index[dep]
                 if advanced:
                     continue
                 work.pop()
-                if work:
-                    low[work[-1][0]] = min(low[work[-1][0]], low[node])
+                if work and low[node] < low[work[-1][0]]:
+                    low[work[-1][0]] = low[node]
                 if low[node] == index[node]:
+                    if stack[-1] == node:      # the usual case: a component of one
+                        stack.pop()
+                        on_stack.discard(node)
+                        components.append([node])
+                        continue
                     comp = []
                     while True:
                         top = stack.pop()
@@ -267,11 +273,13 @@ class _Resolver:
                             break
                     components.append(comp)
         rank = {n: i for i, n in enumerate(source_order)}
+        bindings, order = self.r.bindings, self.r.order
         for comp in components:
-            if len(comp) > 1 or any(dep == comp[0] for dep, _ in self.r.deps[comp[0]]):
+            first = comp[0]
+            if len(comp) > 1 or any(dep == first for dep, _ in deps_of[first]):
                 self.cycle(sorted(comp, key=rank.get))
-            else:
-                self.r.order += [n for n in comp if n in self.r.bindings]
+            elif first in bindings:
+                order.append(first)
 
     def cycle(self, comp: list[str]) -> None:
         """Report one cycle through the component, starting at its first name in source order."""
