@@ -185,8 +185,13 @@ def _solve_square(problem, x, extra_row, extra_rhs, eps, iters=12):
 # --- marching ------------------------------------------------------------------------------------
 
 def _march(problem, x0, direction: float, sag: float, hmax: float, eps: float):
-    """March from x0 (n,) along +-tangent; returns (params (k, n), closed)."""
+    """March from x0 (n,) along +-tangent; returns (params (k, n), closed).
+
+    The march stops at the domain boundary, when it closes at its start, or when it comes back onto
+    its own path in the same direction (it entered a loop away from its start, e.g. past a near
+    singular point where two branches almost touch): a march never circles a loop twice."""
     xs = [x0]
+    path, heading = np.empty((64, 3)), np.empty((64, 3))   # 3-D points and unit tangents so far
     ev = problem.eval(x0[None])
     tan3, tpar = _tangent(ev[1], ev[3])
     tan3, tpar = direction * tan3[0], direction * tpar[0]
@@ -230,6 +235,15 @@ def _march(problem, x0, direction: float, sag: float, hmax: float, eps: float):
                 and np.linalg.norm(x_new - x0) < 2 * h * np.linalg.norm(tpar)):
             xs.append(x0.copy())  # the loop closed
             return np.array(xs), True
+        if len(xs) >= len(path):
+            path, heading = np.resize(path, (2 * len(path), 3)), np.resize(heading, (2 * len(path), 3))
+        path[len(xs) - 1], heading[len(xs) - 1] = p_last, tan3
+        if len(xs) > 8:
+            earlier = slice(0, len(xs) - 6)
+            near = np.linalg.norm(path[earlier] - p_new, axis=1) < 0.5 * h
+            if (near & (heading[earlier] @ t3 > 0.5)).any():
+                xs.append(x_new)
+                return np.array(xs), False
         xs.append(x_new)
         p_last, tan3, tpar = p_new, t3, tp
         h = min(hmax, 0.9 * np.sqrt(8 * sag / max(kappa, 1e-300)), 2 * h)

@@ -87,7 +87,14 @@ def test_revolution_equals_analytic(profile, point, axis, start, sweep, seed):
     analytic = evaluate_revolution(profile, point, axis, angle, v)
     scale = 1 + np.abs(point).max() + np.abs(profile.ctrl).max()
     assert np.abs(analytic - pts).max() <= 1e-12 * scale
-    # the angle grows monotonically with u from start to start + sweep
+    # the angle grows monotonically with u from start (u = 0) to start + sweep (u = 1)
+    vs = np.linspace(0, 1, 21)
+    radial = np.linalg.norm(np.cross(profile.evaluate(vs) - point, k), axis=1)
+    along = surface.evaluate(np.linspace(0, 1, 101), np.full(101, vs[np.argmax(radial)])) - point
+    r = along - np.outer(along @ k, k)
+    turn = np.arctan2(np.cross(r[0], r[1:]) @ k, r[1:] @ r[0])
+    turn = np.unwrap(np.concatenate([[0.0], turn]))
+    assert (np.diff(turn) > 0).all() and turn[-1] == pytest.approx(sweep, abs=1e-9)
     ends = evaluate_revolution(profile, point, axis, np.full(2, start + sweep), np.array([0.3, 0.7]))
     assert np.abs(surface.evaluate([1, 1], [0.3, 0.7]) - ends).max() <= 1e-12 * scale
 

@@ -12,6 +12,8 @@ from rgm.geometry.intersect import intersect_surfaces
 from rgm.geometry.revolve import revolution_surface
 
 KNOTS = np.array([0, 0, 0, 0, 0.5, 1, 1, 1, 1.0])
+#: requested tolerances, coarse to fine: every level within its tol, the finest more accurate than the coarsest
+TOLS = (1e-2, 1e-3, 1e-4)
 
 
 def patch(seed: int, tilt: float, rational: bool) -> NurbsSurface:
@@ -43,15 +45,15 @@ def test_random_surfaces_points_within_tol_of_both_and_error_shrinks(seed, ratio
     # transpose sb so the two parameterisations differ
     sb = sb.swap_uv()
     errors = []
-    for tol in (1e-2, 1e-4):
+    for tol in TOLS:
         branches = intersect_surfaces(sa, sb, tol)
         assert branches, "a tilted surface crosses a flat one"
         assert all(br.max_error <= tol for br in branches)
         err = oracle_error(sa, sb, branches)
         assert err <= tol * (1 + 1e-6)
         errors.append(err)
-    coarse, fine = errors
-    assert fine < coarse or coarse < 1e-4
+    # a tighter tolerance gives a measurably more accurate curve, end to end over two decades
+    assert errors[-1] < errors[0]
 
 
 def test_sphere_and_planar_patch_meet_in_the_known_circle():
