@@ -21,6 +21,7 @@ caller re-parses with lark's own parser, whose interactive state the recovery ne
 """
 from __future__ import annotations
 
+import functools
 import re
 from typing import NamedTuple
 
@@ -82,8 +83,8 @@ class FastLALR:
         alternatives = [terms[n].pattern.to_regexp() for n in order] + [f"(?!{_BLANK})."]
         # one C call splits the text into (blanks, net, token) triples (trailing blanks simply end it):
         # a net (the first alternative) has a group of its own, so that its kind needs no look-up ...
-        self.splitter = re.compile(f"({_BLANK}*)(?:({alternatives[0]})|(" + "|".join(f"(?:{a})" for a in alternatives[1:])
-                                   + "))", re.DOTALL)
+        others = "|".join(f"(?:{a})" for a in alternatives[1:])
+        self.splitter = re.compile(f"({_BLANK}*)(?:({alternatives[0]})|({others}))", re.DOTALL)
         # ... and any other token's kind is found once per distinct spelling: the first alternative
         # that matches it whole is the one that matched it in the text (terminals have no lookahead)
         self.classify = re.compile("|".join(f"(?P<{n}>{a})" for n, a in zip(order + ("_ERROR",), alternatives)),
@@ -156,12 +157,13 @@ class FastLALR:
                 if type(build) is int:     # built `build` times: run the table, compile once it repeats
                     first = shapes is self.shapes[0]
                     if build < _COMPILE_AFTER:
-                        if not self.run(key, first, _Direct(toks, self.methods)):
+                        if not self.direct(key, first, toks):
                             return False
                         shapes[key] = build + 1
                         build = None
                     else:              # a shape that has built statements: it compiles
-                        build = shapes[key] = self.run(key, first, _Source(self.methods))
+                        direct = functools.partial(self.direct, key, first)
+                        build = shapes[key] = self.run(key, first, _Source(self.methods, direct))
                 if build is not None:
                     build(toks)
                 shapes = self.shapes[1]
@@ -177,6 +179,10 @@ class FastLALR:
         role = (_DROPPED if kind in self.dropped else _COMMENT if kind == "COMMENT" else
                 _ERROR if kind == "_ERROR" else _END if kind == "SEMI" else _KEPT)
         return kind, key, role
+
+    def direct(self, shape: tuple[str, ...], first: bool, toks: list) -> bool:
+        """Build one statement of `shape` from its kept tokens while the table runs."""
+        return self.run(shape, first, _Direct(toks, self.methods))
 
     def run(self, shape: tuple[str, ...], first: bool, out):
         """Run the table over one statement shape (with `$END` after it), building through `out`
@@ -246,10 +252,11 @@ class _Direct:
 
 class _Source:
     """Writes what the table does as Python source, `def build(t): ...` over the kept tokens `t`, and
-    compiles it: the builder calls nest as the reductions did, so they run in the same order."""
+    compiles it: the builder calls nest as the reductions did, so they run in the same order. A
+    statement nested too deeply for Python's compiler (about 200 levels) is left to `fallback`."""
 
-    def __init__(self, methods: dict):
-        self.methods, self.lines = methods, []
+    def __init__(self, methods: dict, fallback):
+        self.methods, self.fallback, self.lines = methods, fallback, []
 
     def token(self, k: int) -> str:
         return f"t[{k}]"
@@ -263,7 +270,10 @@ class _Source:
     def done(self, built: list):
         source = "def build(t):\n" + "".join(f"    {line}\n" for line in self.lines + built)
         namespace = dict(self.methods)
-        exec(compile(source, "<statement>", "exec"), namespace)
+        try:
+            exec(compile(source, "<statement>", "exec"), namespace)
+        except (SyntaxError, RecursionError, MemoryError):   # "too many nested parentheses"
+            return self.fallback
         return namespace["build"]
 
 
@@ -283,7 +293,8 @@ class _Rule:
         self.method = None if self.helper else str(rule.alias or self.origin)
         # a left-recursive list helper (`_x_star: _x_star "," item`) appends to the list built so far
         # instead of copying it, which would make a list of n items cost n^2
-        self.grows = bool(self.keep) and self.keep[0] in self.splice and expansion[self.keep[0]].name == rule.origin.name
+        first = self.keep[0] if self.keep else None
+        self.grows = first in self.splice and expansion[first].name == rule.origin.name
         self.unit = self.passthrough and self.size == 1 and self.keep == [0] and not self.splice
         self.whole = not self.splice and len(self.keep) == self.size   # the popped list is the children
 

@@ -59,6 +59,17 @@ def test_compiled_statement_shapes_build_what_the_table_builds(program):
     assert spans(fast) == spans(slow)
 
 
+def test_statements_too_deep_to_compile_are_built_by_the_table():
+    """Python's compiler refuses ~200 nested calls; such a shape keeps being built by running the table."""
+    deep = "f(" * 300 + "1" + ")" * 300
+    chain = " + ".join(["1"] * 3000)
+    text = "".join(f"x{i} := {deep};\ny{i} := {chain};\n" for i in range(5))
+    fast, d1 = parse(text, "deep.rgm")
+    slow, d2 = parse(text, "deep.rgm", fast=False)
+    assert d1 == d2 == [] and len(fast.statements) == 10   # (== on the trees would recurse too deeply)
+    assert [(s.name, s.span) for s in fast.statements] == [(s.name, s.span) for s in slow.statements]
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(1, 6), st.integers(1, 6), st.integers(1, 4), st.data())
 def test_net_values_round_trip_exactly(rows, cols, width, data):
