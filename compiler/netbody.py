@@ -233,12 +233,13 @@ def _decimals(raw: bytes, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | 
     # with one dot at byte j of a word: d * 0x0101.. has a 1 in each byte from j on (its top byte
     # counts the word's dots), and the top byte of d * 0x0807..01 is 8 - j, the bytes from the dot on
     after = [d * _BYTES for d in dots]
-    ndots = sum(a >> _U64(56) for a in after)
-    c = sum((d * _TAIL) >> _U64(56) for d in dots)
+    ndots = after[-1] >> _U64(56)
+    c = (dots[-1] * _TAIL) >> _U64(56)
     if nwords == 2:                                   # a dot in the first word: all of the second is after it
-        in_first = (after[0] >> _U64(56)) != 0
-        c += in_first * _U64(8)
-        after[1] |= in_first * _BYTES
+        first = after[0] >> _U64(56)
+        ndots = ndots + first
+        c = c + ((dots[0] * _TAIL) >> _U64(56)) + (first != 0) * _U64(8)
+        after[1] |= (first != 0) * _BYTES
     undotted = (ndots == 0) * _ALL
     mantissa, carry, bad = None, 0, (ndots > 1) | (length > 8 * nwords) | (length <= ndots)
     for w, d, a in zip(words, dots, after):
@@ -246,10 +247,12 @@ def _decimals(raw: bytes, starts: np.ndarray, ends: np.ndarray) -> np.ndarray | 
         bad |= (v & _HIGH) != 0
         keep = a * _U64(255) | undotted                # bytes from the dot on stay, the rest move up
         moved = v & ~keep
-        v = (v & keep) | (moved << _U64(8)) | carry
+        v = (v & keep) | (moved << _U64(8))
+        if mantissa is not None:                      # the second word: the first one's top byte moves in
+            v |= carry
         carry = moved >> _U64(56)
         mantissa = _digits8(v) if mantissa is None else mantissa * _U64(10**8) + _digits8(v)
-    if nwords == 2:                                   # 8 digits are always exact
+    if nwords == 2:                                   # (8 digits, below 2^27, are always exact)
         bad |= mantissa > _U64(2**53)
     values = mantissa.view(np.int64) / _SCALE.take(c)   # int64 converts to float faster than uint64
     np.negative(values, where=negative, out=values)
