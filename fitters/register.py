@@ -108,23 +108,25 @@ def _spacing(tree: cKDTree, n_sample: int = 1000) -> float:
 
 
 def _workers(n: int) -> int:
-    """cKDTree workers for a query of n points: threads only pay off on large queries."""
-    return -1 if n > 20000 else 1
+    """cKDTree workers for a query of n points: all cores from a few thousand points on (below, starting
+    the threads costs more than they save)."""
+    return -1 if n > 5000 else 1
 
 
 def icp(source, target, target_normals, init=None, *, source_normals=None, target_weights=None,
         tree: cKDTree | None = None, spacing: float | None = None, max_dist: float | None = None,
         min_dist: float | None = None, max_iter: int = 60, tol: float = 1e-5, sample: int = 4000,
-        final_sample: int = 16000,
-        kernel: float = 3.0, seed: int = 0) -> IcpResult:
+        final_sample: int = 16000, kernel: float = 3.0, seed: int = 0) -> IcpResult:
     """Robust point-to-plane ICP of source (n, 3) onto target (m, 3) with unit normals (m, 3).
 
     init : (4, 4) initial source-to-target transform; source_normals : (n, 3), if given, matches whose
     normals differ by more than 45 degrees are dropped (edges, the other side of a thin wall);
     spacing : the target's point spacing (default: measured on the tree); target_weights : (m,)
     confidence of each target point (e.g. its planarity, low at creases);
-    max_dist : initial correspondence distance (default: 3 x the median initial distance); min_dist : its
-    floor (default: 3 x the target's point spacing); sample : source points used in the first stage;
+    max_dist : initial correspondence distance (default: 3 x the median initial distance, at most the
+    source's RMS radius); min_dist : its floor (default: 3 x the target's point spacing);
+    sample : source points used in the first stage, which hands over when the step or the cost change
+    falls below 10 x the final thresholds;
     final_sample : source points (a random subset, Rusinkiewicz & Levoy 2001) of the final stage, which
     runs to convergence; more points hardly change the pose, whose error is bias, not variance;
     kernel : Tukey's constant in units of the MAD scale of the residuals (3.0 trades a little
@@ -141,26 +143,31 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
 
     subset, everything = pick(sample), pick(final_sample)
     radius = float(np.sqrt(((source - source.mean(axis=0)) ** 2).sum(axis=1).mean()))
-    if max_dist is None:
-        d0 = tree.query(source[subset] @ T[:3, :3].T + T[:3, 3])[0]
-        max_dist = max(3 * float(np.median(d0)), min_dist)
-    use, full = subset, len(subset) == len(everything)
+    if max_dist is None:   # from 1000 points, capped at the radius (far queries are the tree's slowest)
+        d0 = tree.query(source[subset[:: max(1, len(subset) // 1000)]] @ T[:3, :3].T + T[:3, 3],
+                        distance_upper_bound=radius)[0]
+        max_dist = min(max(3 * float(np.median(d0)), min_dist), radius)
+    full = len(subset) == len(everything)
+    src = source[subset]
+    src_n = None if source_normals is None else source_normals[subset]
     prev_cost, it, converged = np.inf, 0, False
     A = np.eye(6)
     rms, overlap = np.inf, None
     while it < max_iter:
         it += 1
-        p = source[use] @ T[:3, :3].T + T[:3, 3]
+        p = src @ T[:3, :3].T + T[:3, 3]
         dist, j = tree.query(p, distance_upper_bound=max_dist, workers=_workers(len(p)))
-        ok = np.isfinite(dist)
-        j = np.where(ok, j, 0)
-        if source_normals is not None:
-            ok &= np.einsum("ij,ij->i", source_normals[use] @ T[:3, :3].T, target_normals[j]) > 0.7
+        hit = np.flatnonzero(np.isfinite(dist))
+        j, n = j[hit], target_normals[j[hit]]
+        if src_n is not None:                                       # compatible normals only
+            agree = np.einsum("ij,ij->i", src_n[hit] @ T[:3, :3].T, n) > 0.7
+            hit, j, n = hit[agree], j[agree], n[agree]
+        dist = dist[hit]
         if full:  # overlap at the tight distance, from this pass (the last step is tiny at convergence)
-            overlap = float((ok & (dist <= min_dist)).mean())
-        if ok.sum() < 6:
+            overlap = float((dist <= min_dist).sum() / len(p))
+        if len(hit) < 6:
             break
-        p, q, n, dist, j = p[ok], target[j[ok]], target_normals[j[ok]], dist[ok], j[ok]
+        p, q = p[hit], target[j]
         r = np.einsum("ij,ij->i", p - q, n)
         s = max(1.4826 * float(np.median(np.abs(r))), 0.05 * spacing)
         w = np.clip(1 - (r / (kernel * s)) ** 2, 0, None) ** 2                # Tukey biweight
@@ -175,11 +182,13 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
         cost = float((w * r * r).sum() / max(w.sum(), 1e-300))
         step_len = np.linalg.norm(x[:3]) * radius + np.linalg.norm(x[3:])
         max_dist = max(min_dist, min(max_dist, float(dist.mean() + 3 * dist.std())))
-        if step_len < 3e-3 * spacing or abs(prev_cost - cost) <= tol * cost:
+        loose = 1.0 if full else 10.0                   # the first stage hands over at 10x looser thresholds
+        if step_len < 3e-3 * loose * spacing or abs(prev_cost - cost) <= tol * loose * cost:
             if full:
                 converged = True
                 break
-            use, full, prev_cost = everything, True, np.inf                   # finish on the larger sample
+            src, full, prev_cost = source[everything], True, np.inf           # finish on the larger sample
+            src_n = None if source_normals is None else source_normals[everything]
             continue
         prev_cost = cost
     if overlap is None or not full:
