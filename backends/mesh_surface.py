@@ -146,18 +146,20 @@ class RevolutionPatch(Patch):
         self.breaks_v = np.unique(p.knots[p.degree:len(p.knots) - p.degree])
         self.creases_v = _creases(p.knots, p.degree)
 
+    def _rotate(self, x, u):
+        """Rows x (m, 3) rotated about the axis direction by angles u (m,) (Rodrigues' formula)."""
+        cos, sin = np.cos(u)[:, None], np.sin(u)[:, None]
+        return x * cos + (x @ self._cross_k) * sin + (x @ self._kk) * (1 - cos)
+
     def d1(self, u, v):
         u = np.asarray(u, float)
         c = self.profile.derivatives(np.clip(np.asarray(v, float), *self.domain[1]), 1)
-        w, dw = c[0] - self.a, c[1]
-        kx, kk = self._cross_k, self._kk
-        cos, sin = np.cos(u)[:, None], np.sin(u)[:, None]
+        rw = self._rotate(c[0] - self.a, u)
+        return self.a + rw, rw @ self._cross_k, self._rotate(c[1], u)
 
-        def rot(x):  # Rodrigues' rotation of rows x about k by angle u
-            return x * cos + (x @ kx) * sin + (x @ kk) * (1 - cos)
-
-        rw = rot(w)
-        return self.a + rw, rw @ kx, rot(dw)
+    def evaluate(self, u, v):
+        c = self.profile.evaluate(np.clip(np.asarray(v, float), *self.domain[1]))
+        return self.a + self._rotate(c - self.a, np.asarray(u, float))
 
 
 class PlanePatch(Patch):
