@@ -82,6 +82,11 @@ def _revolution_dims(profile: Profile, suffix: str, snap: float):
     segs, verts = profile.segments, profile.vertices
     dims = _Dims(snap)
     vertical = [s for s in segs if s.kind == "line" and abs(s.p1[0] - s.p0[0]) < 1e-9]
+    if len(segs) == 1 and segs[0].kind == "arc" and abs(segs[0].center[0]) <= dims.snap:
+        # a sphere: one arc about a centre on the axis, from pole to pole
+        radius = dims.add("radius" + suffix, segs[0].radius)
+        return dims, [(f"radius{suffix}", radius)], [("0", 0.0), (f"radius{suffix}", radius),
+                                                      (f"2 * radius{suffix}", round(2 * radius, _DEC))]
     if not vertical:
         return dims, [], []
     main = max(vertical, key=lambda s: abs(s.p1[1] - s.p0[1]))

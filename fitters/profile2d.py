@@ -287,7 +287,9 @@ def fit_conic_profile(rz, *, thr: float, tol: float | None = None, statistic: st
     thr : inlier distance (model units), about 3 noise sigmas.  tol : the bound on `statistic` that
     B-spline stretches are refined to (default 4 thr).  Pieces need a contiguous run of at least
     max(20, 0.25 %) of the points; gaps longer than 4 % of the profile's extent end a run.  With
-    `close_to_axis` a chain end within 5 % of the extent from r = 0 is extended to the axis.
+    `close_to_axis` a chain end within 5 % of the extent from r = 0, an end face, or an arc end within a
+    fifth of its radius of where its circle meets the axis (a dome's pole, where data thin out) is
+    extended to the axis.
     """
     rz = np.asarray(rz, float)
     if len(rz) < 20:
@@ -327,10 +329,14 @@ def fit_conic_profile(rz, *, thr: float, tol: float | None = None, statistic: st
     if close_to_axis:
         for which, piece in ((0, chain[0]), (1, chain[-1])):
             end = piece.ends[which]
+            hit = intersections(piece, _axis_piece(end[1]))
+            if not len(hit):
+                continue
+            hit = hit[np.argmin(np.linalg.norm(hit - end, axis=1))]
             flat_end = piece.kind == "line" and abs(piece.dir[1]) < 1e-12   # an end face across the axis
-            hit = intersections(piece, _axis_piece(end[1])) if end[0] < 0.05 * extent or flat_end else []
-            if len(hit):
-                hit = hit[np.argmin(np.linalg.norm(hit - end, axis=1))]
+            pole = (piece.kind == "arc" and abs(np.linalg.norm(hit - piece.point) - piece.radius) < thr
+                    and np.linalg.norm(hit - end) < 0.2 * piece.radius)     # a dome: data thin out at its pole
+            if end[0] < 0.05 * extent or flat_end or pole:
                 first, last = (hit, last) if which == 0 else (first, hit)
     segments, cur = [], first
     for k, piece in enumerate(chain):

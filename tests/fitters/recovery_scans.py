@@ -48,6 +48,26 @@ def turned_profile(radius=PIN_RADIUS, length=PIN_LENGTH, *, fillet=0.0, bump=Non
     return np.array(pts, float)
 
 
+def revolved_cloud(profile, n, rng, *, noise=0.0):
+    """n points (n, 3) area-uniform on the surface made by revolving the (r, z) polyline `profile` about
+    the z axis, their exact unit normals (n, 3) (of the polyline's chords), and Gaussian noise `noise`
+    (mm) along the normal."""
+    seg = np.diff(profile, axis=0)
+    length = np.linalg.norm(seg, axis=1)
+    area = length * (profile[:-1, 0] + profile[1:, 0])
+    k = rng.choice(len(seg), n, p=area / area.sum())
+    t = rng.random(n)
+    r0, r1 = profile[k, 0], profile[k + 1, 0]
+    t = np.where(np.abs(r1 - r0) > 1e-12, (np.sqrt(r0 ** 2 + t * (r1 ** 2 - r0 ** 2)) - r0) / np.where(
+        np.abs(r1 - r0) > 1e-12, r1 - r0, 1.0), t)                     # uniform in area, not in length
+    rz = profile[k] + t[:, None] * seg[k]
+    nr, nz = seg[k, 1] / length[k], -seg[k, 0] / length[k]              # outward for a profile run upwards
+    phi = rng.uniform(0, 2 * np.pi, n)
+    normals = np.column_stack([nr * np.cos(phi), nr * np.sin(phi), nz])
+    points = np.column_stack([rz[:, 0] * np.cos(phi), rz[:, 0] * np.sin(phi), rz[:, 1]])
+    return points + rng.normal(0, noise, (n, 1)) * normals, normals
+
+
 def raycast_revolved(profile, origins, dirs):
     """First hits (m,) t (inf = miss) of rays o + t d (m, 3) with the surface made by revolving the (r, z)
     polyline `profile` about the y axis (z of the profile = world y)."""

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recovery_scans import sample_primitive
-from rgm.fitters.classify import CATEGORIES, category_scores, classify, split_parts
+from recovery_scans import random_rotation, revolved_cloud, sample_primitive, turned_profile
+from rgm.fitters.classify import QUALITY_FREE_FORM, CATEGORIES, category_scores, classify, split_parts
 from rgm.fitters.pipeline import fit_points
 from rgm.fitters.superellipsoid import Superellipsoid
 
@@ -45,11 +45,85 @@ def test_two_separate_parts_are_split():
     assert sorted(classify(superellipsoid=se).category for _, se in parts) == ["box", "sphere"]
 
 
-def test_free_form_part_is_reported_not_modelled():
+def _vase_cloud(rng, n=6000):
+    """A bulged pin (recovery_scans.turned_profile with a bump) as a point cloud: random pose, 0.03 mm
+    noise, 3 % outliers."""
+    points, _ = revolved_cloud(turned_profile(27.15, 129.88, fillet=4.0, bump=(35, 105, 12)), n, rng, noise=0.03)
+    points = points @ random_rotation(rng).T + rng.uniform(-200, 200, 3)
+    bad = rng.random(n) < 0.03
+    points[bad] += rng.normal(0, 10, (bad.sum(), 3))
+    return points
+
+
+def test_a_bulged_pin_no_superellipsoid_fits_is_other_revolution():
+    for seed in range(2):
+        result = classify(_vase_cloud(np.random.default_rng(20 + seed)))
+        assert result.superellipsoid.quality > QUALITY_FREE_FORM          # the superellipsoid fits badly ...
+        assert result.category == "other_revolution" and result.runner_up == "free_form"  # ... yet it is symmetric
+
+
+def _ellipsoid(rng, n, axes, centre):
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return d * np.asarray(axes, float) * (1 + rng.normal(0, 0.002, (n, 1))) + centre
+
+
+def test_touching_parts_are_split_where_one_superellipsoid_fits_badly():
+    """Two ellipsoids touching at x = 0 (one connected component, not rotationally symmetric), the long
+    one twice as far from the contact with half the points, so that the cut through the centroid across
+    the principal axis is the contact plane."""
+    rng = np.random.default_rng(8)
+    a = _ellipsoid(rng, 2000, (40.0, 15.0, 25.0), (-40.0, 0.0, 0.0))
+    b = _ellipsoid(rng, 4000, (20.0, 40.0, 15.0), (20.0, 0.0, 0.0))
+    rot, shift = random_rotation(rng), rng.uniform(-300, 300, 3)
+    parts = split_parts(np.vstack([a, b]) @ rot.T + shift)
+    assert len(parts) == 2
+    for idx, se in parts:
+        assert max(np.mean(idx < 2000), np.mean(idx >= 2000)) > 0.97     # each part is (almost) one ellipsoid
+        truth = (40.0, 25.0, 15.0) if np.mean(idx < 2000) > 0.5 else (40.0, 20.0, 15.0)
+        assert classify(superellipsoid=se).category == "ellipsoid"
+        assert np.allclose(np.sort(se.size)[::-1], truth, atol=1.5)
+
+
+def test_a_rotationally_symmetric_part_is_not_split():
+    assert len(split_parts(_vase_cloud(np.random.default_rng(30)))) == 1
+
+
+def test_sphere_is_one_arc_revolved_with_a_radius_param():
+    rng = np.random.default_rng(4)
+    d = rng.normal(size=(20000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    points = d * (30.0 + rng.normal(0, 0.03, (20000, 1))) @ random_rotation(rng).T + [100.0, -50.0, 20.0]
+    result = fit_points(points, tol=0.1)
+    part = result.report["parts"][0]
+    assert part["category"] == "sphere" and part["certificate"]["holds"]
+    assert abs(part["params"]["radius"] - 30.0) < 0.01
+    assert "profile(arc(pt(0, 0, 0), pt(radius, radius, 0), pt(0, 2 * radius, 0)))" in result.text
+    assert part["certificate"]["max"] < 0.2                                # closed at both poles
+
+
+def test_free_form_part_is_modelled_as_certified_nurbs_patches():
+    """A free-form blob goes to the free-form builder: trimmed NURBS patches in the .rgm, each with a
+    certificate whose figures are the closest-point distances of the points nearest to it, re-measured
+    here on the file compiled from scratch."""
+    import rgm
+    from rgm.fitters.certificate import nearest_part, shape_from_model
+    from rgm.model import TrimmedFace
+
     pts = sample_primitive("free_form", np.random.default_rng(3), 4000, outliers=0.0)
     result = fit_points(pts, tol=0.5)
-    assert result.parts == [] and "free_form" in result.report["notes"][0]
-    assert "not modelled" in result.text
+    part = result.report["parts"][0]
+    assert part["category"] == "free_form" and part["model"] == "free_form" and result.parts
+    assert "bsurface(" in result.text and "trim(" in result.text and result.text.count("@fit(") == len(result.parts)
+    model = rgm.loads(result.text)
+    faces = [model.objects[p.name] for p in result.parts]
+    assert all(isinstance(f, TrimmedFace) for f in faces)
+    owner, dist = nearest_part([shape_from_model(f) for f in faces], pts)
+    for k, (cert, info) in enumerate(zip(result.certificates, part["patches"])):
+        d = dist[owner == k]
+        assert cert.points == len(d) and np.isclose(cert.p95, np.percentile(d, 95), rtol=1e-9)
+        assert np.isclose(cert.max, d.max(), rtol=1e-9) and info["certificate"]["p95"] == cert.p95
+    assert sum(c.points for c in result.certificates) == len(pts)
 
 
 def test_provenance_date_follows_source_date_epoch(monkeypatch):
