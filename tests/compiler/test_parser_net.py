@@ -5,6 +5,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from rgm.compiler import netbody
+from rgm.compiler.netbody import _CHUNK as CHUNK
 from rgm.compiler.netbody import FAST_MIN, NetError, _fast_read, read_net
 from rgm.compiler.parser import parse
 
@@ -80,11 +81,11 @@ def test_the_vectorised_reader_reads_what_float_reads(width, seed):
     entries = [[number() for _ in range(width)] for _ in range(n)]
     body = rnd.choice([", ", ",\n  ", " ,", ","]).join(" ".join(e) for e in entries) + rnd.choice(["", ",", " ,\n"])
     assert len(body) >= FAST_MIN
-    netbody._CHUNK = rnd.choice([64, 4096, 1 << 20])     # chunks end after a comma, several per body
+    netbody._CHUNK = rnd.choice([64, 4096, 1 << 18])     # chunks end after a comma, several per body
     try:
         data, w, count = _fast_read(body, 0, len(body))
     finally:
-        netbody._CHUNK = 1 << 20
+        netbody._CHUNK = CHUNK
     assert (w, count) == (width, n)
     assert data.tobytes() == np.array([float(x) for e in entries for x in e]).tobytes()
 
@@ -101,7 +102,7 @@ def test_both_readers_report_the_same_error(mistake, at):
     text = f"net {len(good) + mistake.count(',')} [" + ", ".join(good) + "]"
     assert len(text) >= FAST_MIN
     errors = []
-    for limit, chunk in ((FAST_MIN, 1 << 20), (FAST_MIN, 100), (10**12, 1 << 20)):   # vectorised, then exact
+    for limit, chunk in ((FAST_MIN, CHUNK), (FAST_MIN, 100), (10**12, CHUNK)):   # vectorised, then exact
         netbody.FAST_MIN, netbody._CHUNK = limit, chunk
         try:
             read_net(text)
@@ -109,5 +110,5 @@ def test_both_readers_report_the_same_error(mistake, at):
         except NetError as e:
             errors.append((e.message, e.start, e.end, e.hint))
         finally:
-            netbody.FAST_MIN, netbody._CHUNK = FAST_MIN, 1 << 20
+            netbody.FAST_MIN, netbody._CHUNK = FAST_MIN, CHUNK
     assert errors[0] == errors[1] == errors[2] and errors[0] is not None
