@@ -15,7 +15,8 @@ import numpy as np
 
 from rgm.fitters.io import Scan
 
-__all__ = ["PARTS", "SyntheticView", "render", "look_at", "box_sdf", "grooved_cylinder_sdf", "freeform_patch_sdf"]
+__all__ = ["PARTS", "SyntheticView", "render", "look_at", "box_sdf", "grooved_cylinder_sdf", "freeform_patch_sdf",
+           "pin_sdf"]
 
 
 def _corner_sdf(a, b):
@@ -37,6 +38,14 @@ def grooved_cylinder_sdf(p, radius=25.0, length=100.0, groove_at=15.0, groove_wi
     return np.maximum(body, -groove)
 
 
+def pin_sdf(p, radius=27.15, length=129.88, chamfer=1.2):
+    """SDF bound of the paper's pin (Figure 7): a cylinder along y, centred at the origin, with 45 deg
+    chamfers of `chamfer` mm at both ends (mm)."""
+    r, h = np.hypot(p[:, 0], p[:, 2]), np.abs(p[:, 1]) - length / 2
+    body = _corner_sdf(h, r - radius)
+    return np.maximum(body, (r - radius + h + chamfer) / np.sqrt(2))
+
+
 def _patch_height(x, y):
     """A free-form height field (mm) on [-50, 50]^2: two bumps, a dip and a gentle wave."""
     return (12 * np.exp(-((x - 15) ** 2 + (y - 10) ** 2) / 300) - 8 * np.exp(-((x + 20) ** 2 + (y + 15) ** 2) / 200)
@@ -51,7 +60,8 @@ def freeform_patch_sdf(p):
 
 
 #: name -> (sdf, characteristic size in mm used for noise and tolerances)
-PARTS = {"box": (box_sdf, 100.0), "cylinder": (grooved_cylinder_sdf, 100.0), "patch": (freeform_patch_sdf, 100.0)}
+PARTS = {"box": (box_sdf, 100.0), "cylinder": (grooved_cylinder_sdf, 100.0), "patch": (freeform_patch_sdf, 100.0),
+         "pin": (pin_sdf, 140.0)}
 
 
 @dataclass(frozen=True, eq=False)
