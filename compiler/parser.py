@@ -80,6 +80,7 @@ def parse(text: str | bytes, filename: str = "<input>", *, fast: bool = True
                 run.diags.append(error("E0009", "this expression is nested too deeply to read", run.span(0, 1)))
             return run.program(), run.diags
         finally:
+            _BUILDER.run = None   # the tree is the caller's: freeing it must not wait for the next parse
             if collecting:
                 gc.enable()
 
