@@ -2,8 +2,9 @@
 
 Triangulates one view (a range image keeps its pixel grid; an unstructured view is projected on its
 best-fit plane) by greedy insertion until every point lies within T of the mesh along the viewing
-direction, with no triangle across a depth discontinuity or an invalid pixel.  T is in the scan's own
-units (the bunny is in metres: --tol 0.0004 is 0.4 mm).  Range images are RLTS-filtered first (outliers
+direction, then removes the vertices that are no longer needed, with no triangle across a depth
+discontinuity or an invalid pixel.  T is in the scan's own units (the bunny is in metres: --tol 0.0004
+is 0.4 mm).  Range images are RLTS-filtered first (outliers
 dropped) unless --no-filter.  Prints vertex and triangle counts and the measured max and RMS error.
 Exit codes: 0 written, 1 bad input, 2 usage.
 """
