@@ -37,7 +37,7 @@ from rgm.model import (
     Plane, Polyline, Revolution, RuledSurface, Shell, TrimmedFace,
 )
 
-from .iges_curves import model_curve, parameter_curve
+from .iges_curves import arc_placement, model_curve, parameter_curve
 from .iges_format import (
     PHYSICAL, UNIT_FLAGS, USE_DEFINITION, USE_PARAMETRIC, Entity, GlobalSection, IgesFile, iges_date,
 )
@@ -76,8 +76,10 @@ class _Lowering:
 
     # -- bookkeeping -------------------------------------------------------------------------
     def _add(self, obj, entity: Entity, root: bool) -> int:
+        """Add `entity` (of model object `obj`, or None): independent when a root, else physically
+        dependent; geometry gets the file's colour; a named object its 406 name and DE label."""
         entity.subordinate = 0 if root else PHYSICAL
-        if entity.use == 0 and not entity.transform:
+        if entity.use == 0:
             entity.color = self.color
         name = getattr(obj, "name", None)
         if name:
@@ -142,35 +144,12 @@ class _Lowering:
         raise BackendError(f"IGES: cannot write {type(obj).__name__}{_of(obj)}")
 
     def _arc(self, obj, root: bool, use: int) -> int:
-        """100 in its definition plane; a 124 places it unless the normal is +z (written as is) or -z
-        (a half-turn about x: coordinates negated exactly)."""
-        n = obj.normal
-        if isinstance(obj, Circle):
-            from rgm.geometry.conics import perpendicular
-
-            x = perpendicular(n)
-            frame = np.column_stack([x, np.cross(n, x), n])
-            r = obj.radius
-            params = [0.0, 0.0, 0.0, r, 0.0, r, 0.0]
-            origin = _as3(obj.center)
-        else:
-            c, s, e = _as3(obj.center), _as3(obj.start_point), _as3(obj.end_point)
-            if n[2] == 1.0:
-                frame, origin = None, None
-                params = [c[2], c[0], c[1], s[0], s[1], e[0], e[1]]
-            elif n[2] == -1.0:
-                frame, origin = np.diag([1.0, -1.0, -1.0]), np.zeros(3)
-                params = [-c[2], c[0], -c[1], s[0], -s[1], e[0], -e[1]]
-            else:
-                x, y = obj.frame
-                frame, origin = np.column_stack([x, y, n]), c
-                ls, le = (np.array([x @ (p - c), y @ (p - c)]) for p in (s, e))
-                params = [0.0, 0.0, 0.0, *ls, *le]
+        """100 in its definition plane, placed by a 124 unless the normal is +z (`arc_placement`)."""
+        placement = arc_placement(obj)
         self._points(_as3(obj.center))
-        entity = Entity(100, params, use=use)
-        if frame is not None:
-            matrix = np.column_stack([frame, origin]).ravel()
-            entity.transform = self.iges.add(Entity(124, [matrix], form=0, subordinate=PHYSICAL,
+        entity = Entity(100, placement.params, use=use)
+        if placement.matrix is not None:
+            entity.transform = self.iges.add(Entity(124, [placement.matrix.ravel()], form=0, subordinate=PHYSICAL,
                                                     use=USE_DEFINITION, hierarchy=0))
         return self._add(obj, entity, root)
 
@@ -220,7 +199,7 @@ class _Lowering:
             profile = profile.transform(_rotation(obj.axis_point, obj.axis_dir, start))
             start, end = 0.0, end - start
         axis_pts = self._points(np.stack([obj.axis_point, obj.axis_point + obj.axis_dir]))
-        axis = self.iges.add(Entity(110, [axis_pts.ravel()], subordinate=PHYSICAL))
+        axis = self._add(None, Entity(110, [axis_pts.ravel()]), False)
         gen = self.child(profile)
         return self._add(obj, Entity(120, [axis, gen, float(start), float(min(end, _TWO_PI))]), root)
 
@@ -264,8 +243,9 @@ class _Lowering:
         # that prefer it still get the exact geometry to ~1e-10 of the surface's size
         ftol = min(self.tol, 1e-10 * _size(surface))
         if piece.dim == 2:
-            return piece, model_curve(surface, piece.nurbs(), ftol), 0
-        return parameter_curve(surface, piece.nurbs(), ftol), piece, 0
+            return piece, model_curve(surface, piece, ftol), 0
+        exact = piece.nurbs() if isinstance(piece, (Circle, CircularArc)) else piece   # see `_piece`
+        return parameter_curve(surface, exact, ftol), piece, 0
 
     def _loop(self, loop: Loop, surface, sde: int) -> int:
         """142: CRTN, SPTR, BPTR (2-D curve or 102 of them), CPTR (3-D), PREF."""
@@ -284,22 +264,22 @@ class _Lowering:
         return self._add(loop, Entity(142, [crtn, sde, bptr, cptr, pref], use=USE_PARAMETRIC), False)
 
     def _piece(self, curve, dim: int) -> int:
+        """A loop piece's curve: a fitted partner (NurbsCurve) as a 126; a model-space circle or arc as the
+        126 form 2 of its exact NURBS (so its parameter is its pcurve's: a receiver that keeps both
+        curves, OpenCASCADE with PREF = 2, would otherwise re-approximate the pcurve); else the object."""
         from rgm.geometry import NurbsCurve
 
         use = USE_PARAMETRIC if dim == 2 else 0
-        if isinstance(curve, NurbsCurve):
-            return self.iges.add(self._bspline_dependent(curve, dim, use))
+        if isinstance(curve, NurbsCurve) or (dim == 3 and isinstance(curve, (Circle, CircularArc))):
+            form = 0 if isinstance(curve, NurbsCurve) else 2
+            e = self._bspline(curve if form == 0 else curve.nurbs(), form, dim, use)
+            return self._add(curve if form else None, e, False)
         return self.child(curve, dim, use)
-
-    def _bspline_dependent(self, curve, dim, use) -> Entity:
-        e = self._bspline(curve, 0, dim, use)
-        e.subordinate = PHYSICAL
-        return e
 
     def _chain(self, des: list, use: int) -> int:
         if len(des) == 1:
             return des[0]
-        return self.iges.add(Entity(102, [len(des), *des], subordinate=PHYSICAL, use=use))
+        return self._add(None, Entity(102, [len(des), *des], use=use), False)
 
 
 def _of(obj) -> str:

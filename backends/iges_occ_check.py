@@ -15,33 +15,35 @@ __all__ = ["OccIges", "occ_read_iges", "occ_write_iges", "sample_shape"]
 
 @dataclass
 class OccIges:
-    """What IGESControl_Reader made of a file: the shape of all roots, counts, fail messages, and per
-    face its surface type, number of wires and sample points."""
+    """What IGESControl_Reader made of a file: the shape of all roots, counts, fail messages, and the
+    shape transferred from each root (in root order: rgm writes roots in export order)."""
 
     shape: object
     roots: int
     transferred: int
     fails: list
-    faces: list      # (surface type name, wire count, points (k, 3), (u, v) params (k, 2))
-    edges: list      # points (k, 3) on each edge's 3-D curve
+    shapes: list
 
 
-def _messages(check_list) -> list[str]:
+def _fails(check_iterator) -> list[str]:
+    """Fail messages of every check in an Interface_CheckIterator."""
+    from rgm.backends.occ import _text
+
     out = []
-    it = check_list
-    for i in range(1, it.NbChecks() + 1) if hasattr(it, "NbChecks") else []:
-        check = it.Value(i)
-        out += [check.CFail(j).ToCString() for j in range(1, check.NbFails() + 1)]
+    check_iterator.Start()
+    while check_iterator.More():
+        check = check_iterator.Value()
+        out += [_text(check.CFail(j)) for j in range(1, check.NbFails() + 1)]
+        check_iterator.Next()
     return out
 
 
-def occ_read_iges(path, samples: int = 7) -> OccIges:
-    """Read `path` with IGESControl_Reader, transfer every root, and sample each face (a
-    samples x samples grid over its UV bounds) and edge (samples points over its range)."""
+def occ_read_iges(path) -> OccIges:
+    """Read `path` with IGESControl_Reader and transfer every root."""
     from OCP.IFSelect import IFSelect_RetDone
     from OCP.IGESControl import IGESControl_Reader
 
-    from rgm.backends.occ import _quiet
+    from rgm.backends.occ import _quiet, _text
 
     _quiet()
     reader = IGESControl_Reader()
@@ -50,21 +52,14 @@ def occ_read_iges(path, samples: int = 7) -> OccIges:
     model = reader.Model()
     if model is not None:
         check = model.GlobalCheck()
-        fails += [check.CFail(i).ToCString() for i in range(1, check.NbFails() + 1)]
+        fails += [_text(check.CFail(i)) for i in range(1, check.NbFails() + 1)]
     if status != IFSelect_RetDone:
-        return OccIges(None, 0, 0, fails, [], [])
+        return OccIges(None, 0, 0, fails, [])
     roots = reader.NbRootsForTransfer()
     transferred = reader.TransferRoots()
-    try:
-        checks = reader.WS().TransferReader().LastCheckList()
-        for i in range(1, checks.NbChecks() + 1) if hasattr(checks, "NbChecks") else []:
-            c = checks.Value(i)
-            fails += [c.CFail(j).ToCString() for j in range(1, c.NbFails() + 1)]
-    except AttributeError:
-        pass
-    shape = reader.OneShape()
-    faces, edges = sample_shape(shape, samples)
-    return OccIges(shape, roots, transferred, fails, faces, edges)
+    fails += _fails(reader.WS().TransferReader().TransientProcess().CheckList(False))
+    shapes = [reader.Shape(i) for i in range(1, reader.NbShapes() + 1)]
+    return OccIges(reader.OneShape(), roots, transferred, fails, shapes)
 
 
 def occ_write_iges(shapes, path, units: str = "MM", brep_mode: int = 0) -> None:

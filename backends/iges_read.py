@@ -244,8 +244,9 @@ class _Reader:
         w = vals[k + m + 2:k + m + 2 + n]
         ctrl = vals[k + m + 2 + n:k + m + 2 + 4 * n].reshape(n, 3)[:, :dim]
         v0, v1 = vals[-2:]
-        curve = NurbsCurve(m, knots, ctrl, None if poly == 1 else w)
-        return BSplineCurve(_sub_curve(curve, v0, v1))
+        curve = _sub_curve(NurbsCurve(m, knots, ctrl, None if poly == 1 else w), v0, v1)
+        arc = _as_arc(curve) if self.d.entries[de].form == 2 else None
+        return arc if arc is not None else BSplineCurve(curve)
 
     def _e128(self, de, dim):
         from rgm.geometry import NurbsSurface
@@ -384,6 +385,29 @@ def _sub_curve(curve, v0: float, v1: float):
     return curve
 
 
+def _as_arc(curve):
+    """The Circle or CircularArc a 126 form 2 (circular arc) is, when its points lie on one circle to
+    1e-12 of its radius (centre and normal from three points in order, so the sense is kept); else None."""
+    p = curve.evaluate(np.linspace(*curve.domain, 33))
+    p3 = np.column_stack([p, np.zeros(len(p))]) if p.shape[1] == 2 else p
+    a, b, c = p3[0], p3[11], p3[22]
+    n = np.cross(b - a, c - b)
+    if not np.linalg.norm(n) > 0:
+        return None
+    n /= np.linalg.norm(n)
+    ab, ac = b - a, c - a
+    centre = a + (np.cross(n, ab) * (ac @ ac) - np.cross(n, ac) * (ab @ ab)) / (2 * np.cross(ab, ac) @ n)
+    r = np.linalg.norm(p3 - centre, axis=1)
+    if np.ptp(r) > 1e-12 * r[0] or np.abs((p3 - centre) @ n).max() > 1e-12 * r[0]:
+        return None
+    dim = p.shape[1]
+    if dim == 2:
+        n = np.array([0.0, 0.0, np.sign(n[2])])
+    if np.linalg.norm(p3[-1] - p3[0]) <= 1e-12 * r[0]:
+        return Circle(centre[:dim], n, float(r.mean()))
+    return CircularArc(centre[:dim], n, float(np.linalg.norm(p3[0] - centre)), p[0], p[-1])
+
+
 def _sub_surface(s, u0, u1, v0, v1):
     (a, b), (c, e) = s.domain
     for direction, t0, t1, lo, hi in (("u", u0, u1, a, b), ("v", v0, v1, c, e)):
@@ -453,25 +477,25 @@ def read_iges(text: str, source: str | None = None) -> IgesImport:
 
 def _loop_gap(objects) -> float:
     """Largest distance (model units) from a model-space loop piece to its face's surface (65 samples
-    per piece), over the trimmed faces among `objects` (shells included)."""
+    per piece, one inversion per face), over the trimmed faces among `objects` (shells included)."""
     gap = 0.0
     for obj in objects:
-        faces = obj.faces if isinstance(obj, Shell) else [obj]
-        for face in faces:
+        for face in obj.faces if isinstance(obj, Shell) else [obj]:
             if not isinstance(face, TrimmedFace) or isinstance(face.surface, Plane):
                 continue
-            for loop in face.loops():
-                for piece in loop.pieces:
-                    if piece.dim != 3:
+            pts = []
+            for piece in (p for loop in face.loops() for p in loop.pieces if p.dim == 3):
+                for p in piece.pieces if isinstance(piece, CompositeCurve) else (piece,):
+                    try:
+                        c = p.nurbs()
+                        pts.append(c.evaluate(np.linspace(*c.domain, 65)))
+                    except _DATA_ERRORS:  # a degenerate piece: the compiler's checks will name it
                         continue
-                    pieces = piece.pieces if isinstance(piece, CompositeCurve) else (piece,)
-                    for p in pieces:
-                        try:
-                            c = p.nurbs()
-                            pts = c.evaluate(np.linspace(*c.domain, 65))
-                            gap = max(gap, float(face.surface.nurbs().closest_point(pts)[3].max()))
-                        except _DATA_ERRORS:  # a degenerate piece: the compiler's checks will name it
-                            continue
+            try:
+                if pts:
+                    gap = max(gap, float(face.surface.nurbs().closest_point(np.concatenate(pts))[3].max()))
+            except _DATA_ERRORS:
+                continue
     return gap
 
 
