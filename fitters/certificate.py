@@ -2,8 +2,11 @@
 
 Every figure comes from exact closest-point distances of the points used to the built surface (the
 shape's own `distance`: the meridian-plane distance for a full surface of revolution, the box's exact
-distance function).  `coverage` is the share of the model's surface that has data: surface samples
-(spacing ~ the scan's point spacing) with a scan point within 3 spacings.
+distance function, a trimmed NURBS face's closest point restricted to its trim,
+`rgm.fitters.freeform_measure`).  Each filtered point counts for the part nearest to it
+(`nearest_part`), both when `rgmc fit` certifies and when `rgmc verify` re-measures.  `coverage` is the
+share of the model's surface that has data: surface samples (spacing ~ the scan's point spacing) with a
+scan point within a few spacings.
 
 Which statistic does the tolerance bound?  On real scans the maximum includes the scanner's noise and
 the few outliers that survive filtering, so by default the tolerance bounds the 95th percentile
@@ -16,7 +19,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-__all__ = ["Certificate", "certify", "STATISTICS"]
+__all__ = ["Certificate", "certify", "STATISTICS", "nearest_part", "surface_coverage", "shape_from_model"]
 
 STATISTICS = ("max", "p99", "p95")
 
@@ -68,6 +71,31 @@ def surface_coverage(surface_samples, points, radius: float) -> float:
     return float(np.mean(np.isfinite(d)))
 
 
+def nearest_part(shapes, points) -> tuple[np.ndarray, np.ndarray]:
+    """(owner (n,), distance (n,)): the index of the shape nearest to each point (n, 3) and its distance
+    (model units). Each shape has `distance(points)`; a shape with `bounds()` ((2, 3), a box holding it)
+    is measured only at points whose distance to that box, a lower bound, is below the best so far."""
+    points = np.asarray(points, float)
+    best = np.full(len(points), np.inf)
+    owner = np.full(len(points), -1)
+
+    def lower(k):
+        if not hasattr(shapes[k], "bounds"):
+            return np.zeros(len(points))
+        lo, hi = shapes[k].bounds()
+        return np.linalg.norm(np.maximum(np.maximum(lo - points, points - hi), 0.0), axis=1)
+
+    bounds = [lower(k) for k in range(len(shapes))]
+    for k in np.argsort([np.median(b) if len(b) else 0.0 for b in bounds], kind="stable"):
+        todo = np.nonzero(bounds[k] < best)[0]
+        if len(todo) == 0:
+            continue
+        d = np.asarray(shapes[k].distance(points[todo]), float)
+        better = d < best[todo]
+        best[todo[better]], owner[todo[better]] = d[better], k
+    return owner, best
+
+
 # ------------------------------------------------------------------------ shapes from a compiled model
 def _rz(p, axis_point, axis_dir):
     d = np.asarray(p, float) - axis_point
@@ -109,13 +137,17 @@ def _profile_segments(curve, axis_point, axis_dir):
 
 
 def shape_from_model(obj):
-    """A measurable shape (RevolutionFit or BoxFit, both with `.distance(points)`) for an evaluated model
-    object of the kinds `rgmc fit` writes: a full Revolution, or a Shell whose sides are an Extrusion of
-    a closed rectangle (a box)."""
+    """A measurable shape (with `.distance(points)`) for an evaluated model object of the kinds `rgmc fit`
+    writes: a full Revolution (RevolutionFit), a Shell whose sides are an Extrusion of a closed rectangle
+    (a box: BoxFit), a TrimmedFace on a B-spline surface or such a surface (TrimmedNurbs)."""
+    from rgm.fitters.freeform_measure import TrimmedNurbs
     from rgm.fitters.primitives import BoxFit
     from rgm.fitters.profile2d import Profile
     from rgm.fitters.revolution import RevolutionFit
-    from rgm.model.objects import Extrusion, Polyline, Revolution, Shell, TrimmedFace
+    from rgm.model.objects import BSplineSurface, Extrusion, Polyline, Revolution, Shell, TrimmedFace
+
+    if isinstance(obj, BSplineSurface) or isinstance(obj, TrimmedFace) and isinstance(obj.surface, BSplineSurface):
+        return TrimmedNurbs.from_model(obj)
 
     if isinstance(obj, Revolution):
         a = np.asarray(obj.axis_point, float)
@@ -134,4 +166,5 @@ def shape_from_model(obj):
                 frame[:3, :3] = np.column_stack([e / np.linalg.norm(e) for e in (e1, e2, h)])
                 frame[:3, 3] = p[0] + (e1 + e2 + h) / 2
                 return BoxFit(frame, np.array([np.linalg.norm(e1), np.linalg.norm(e2), np.linalg.norm(h)]) / 2)
-    raise ValueError(f"rgmc verify cannot measure a {type(obj).__name__} yet (revolutions and boxes only)")
+    raise ValueError(f"rgmc verify cannot measure a {type(obj).__name__} yet (revolutions, boxes and "
+                     f"B-spline surfaces, trimmed or not, only)")

@@ -277,9 +277,10 @@ def emit_part(shape, name: str, suffix: str = "", *, snap: float = 0.0) -> Emitt
     raise TypeError(f"no emitter for {type(shape).__name__}")
 
 
-def annotations(classification, certificate, sources) -> list[str]:
-    """@source, @classified and @fit lines for an exported binding."""
-    out = []
+def annotations(classification, certificate, sources, stopped: str = "") -> list[str]:
+    """@source, @classified and @fit lines for an exported binding; when the fit's refinement `stopped`
+    short of the tolerance, a comment saying why comes first (the @fit annotation has no field for it)."""
+    out = [f"# refinement stopped: {stopped}"] if stopped else []
     if sources:
         names = ", ".join(f'"{s}"' for s, _ in sources)
         hashes = ", ".join(f'"{h}"' for _, h in sources)

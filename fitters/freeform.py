@@ -4,7 +4,8 @@ The paper's recipe (its Figure 6 for a profile, Figure 5 for the face mask): sta
 vector whose size comes from a surface characterisation, solve for the control points in the least-squares
 sense, measure the error of every data point, insert knots in the middle of *only those knot spans* whose
 points exceed the tolerance, and solve again, until the certified statistic holds or a stated limit on
-control points is reached.
+control points is reached. This module holds the bases, the solvers and the curve fit; the surface loop,
+with its approximation limit (no net finer than the data), is `rgm.fitters.freeform_surface.fit_surface`.
 
 The error of a data point is its parametric residual |S(u_i, v_i) - P_i| (model units). It is an upper
 bound of the point's closest-point distance to the surface, so a fit certified with it is conservative.
@@ -55,21 +56,21 @@ def _span_index(x: np.ndarray, knots: np.ndarray, degree: int) -> tuple[np.ndarr
     return idx, breaks
 
 
-def _split_candidates(x, res, knots, degree, tol, min_width, greed=0.5):
+def _split_candidates(x, res, knots, degree, tol, min_count, greed=0.5):
     """Midpoints of the spans to refine, worst first, and their worst residuals: the spans whose worst
-    residual exceeds both `tol` and `greed` times the worst of all (spans narrower than `min_width` are
-    kept). Splitting only the worst spans each round (a least-squares error spreads over neighbouring
-    spans) avoids over-refining."""
+    residual exceeds both `tol` and `greed` times the worst of all and that hold at least 2 `min_count`
+    of the data parameters `x` (so that each half keeps about `min_count`: a net finer than the data
+    would interpolate the samples and their noise). Splitting only the worst spans each round (a
+    least-squares error spreads over neighbouring spans) avoids over-refining."""
     idx, breaks = _span_index(x, knots, degree)
     worst = np.zeros(len(breaks) - 1)
     np.maximum.at(worst, idx, res)
-    bad = np.nonzero((worst > max(tol, greed * worst.max())) & (np.diff(breaks) > min_width))[0]
+    splittable = np.bincount(idx, minlength=len(breaks) - 1) >= 2 * min_count
+    if not splittable.any():
+        return np.zeros(0), np.zeros(0)
+    bad = np.nonzero((worst > max(tol, greed * worst[splittable].max())) & splittable)[0]
     bad = bad[np.argsort(-worst[bad], kind="stable")]
     return 0.5 * (breaks[bad] + breaks[bad + 1]), worst[bad]
-
-
-def _spans_to_split(x, res, knots, degree, tol, min_width, greed=0.5):
-    return _split_candidates(x, res, knots, degree, tol, min_width, greed)[0]
 
 
 # --------------------------------------------------------------------------------------------- results
@@ -163,7 +164,6 @@ def fit_curve(points, tol: float, *, params=None, degree: int = 3, n_initial: in
     t = chord_parameters(points) if params is None else np.asarray(params, float)
     knots = uniform_knots(degree, n_initial or degree + 1)
     history, prev = [], None
-    min_width = 1.0 / max(len(points), 1)
     while True:
         ctrl, B = _solve_curve(t, points, knots, degree, smoothing, fix_ends)
         res = np.linalg.norm(B @ ctrl - points, axis=1)
@@ -175,7 +175,7 @@ def fit_curve(points, tol: float, *, params=None, degree: int = 3, n_initial: in
         history.append((len(ctrl), stats.value))
         if stats.holds:
             return CurveFit(degree, knots, ctrl, stats, tuple(history))
-        new = _spans_to_split(t, res, knots, degree, tol, min_width)
+        new = _split_candidates(t, res, knots, degree, tol, 1)[0]
         if len(new) == 0:
             return CurveFit(degree, knots, ctrl, stats, tuple(history), "no span can be split further")
         if len(ctrl) + len(new) > max_ctrl:
@@ -186,13 +186,15 @@ def fit_curve(points, tol: float, *, params=None, degree: int = 3, n_initial: in
 
 def refinement_matrix(knots, new_knots, degree) -> np.ndarray:
     """Matrix R (n_new, n_old) with N_old = N_new R, so that control points P_new = R P_old describe the
-    same spline on the refined knot vector. Computed as an exact least-squares projection on a sample
-    that is unisolvent for the refined space (the spaces are nested, so the residual is round-off)."""
-    breaks = np.unique(new_knots)
-    s = np.unique(breaks[:-1, None] + np.diff(breaks)[:, None] * np.linspace(0.0, 1.0, degree + 2))
-    Bo = design_matrix(s, knots, degree).toarray()
-    Bn = design_matrix(s, new_knots, degree).toarray()
-    return np.linalg.lstsq(Bn, Bo, rcond=None)[0]
+    same spline on the refined knot vector `new_knots` (a superset of `knots`): knot refinement
+    (Piegl & Tiller A5.4) applied to the identity as control points."""
+    from rgm.geometry.knots import refine_knots
+
+    values, new_counts = np.unique(new_knots, return_counts=True)
+    old_counts = np.searchsorted(knots, values, side="right") - np.searchsorted(knots, values, side="left")
+    inserted = np.repeat(values, new_counts - old_counts)
+    n_old = len(knots) - degree - 1
+    return refine_knots(np.asarray(knots, float), degree, np.eye(n_old), inserted)[1]
 
 
 # --------------------------------------------------------------------------------------------- surfaces
@@ -301,10 +303,7 @@ def solve_scattered(u, v, points, ku, kv, p, q, smoothing=1e-6):
     R = _smoothing_matrix(nu, nv)
     lam = smoothing * M.diagonal().sum() / max(R.diagonal().sum(), 1e-300)
     M = (M + lam * R + 1e-14 * M.diagonal().max() * sp.identity(nu * nv)).tocsc()
-    if nu * nv <= 2500:
-        ctrl = scipy.linalg.solve(M.toarray(), rhs, assume_a="pos")
-    else:
-        ctrl = scipy.sparse.linalg.splu(M).solve(rhs)
+    ctrl = scipy.sparse.linalg.splu(M).solve(rhs)   # sparse LU of the banded normal matrix: no dense BLAS
     return ctrl.reshape(nu, nv, 3), basis
 
 
@@ -327,201 +326,10 @@ def solve_grid(u, v, grid, ku, kv, p, q, smoothing=1e-6):
     return ctrl.reshape(Bv.shape[1], Bu.shape[1], 3).transpose(1, 0, 2), Bu, Bv
 
 
-def initial_net_size(grid: np.ndarray | None, mask, degree: int, n_points: int) -> int:
-    """Initial control points per direction from a surface characterisation: the number of geometrically
-    homogeneous patches (connected regions of equal sign of mean and Gaussian curvature, estimated on the
-    data grid) sets the net size, as in the paper; without a grid, the point count sets a coarse size."""
-    if grid is None or min(grid.shape[:2]) < 7:
-        return degree + 1 + int(np.clip(np.sqrt(n_points) / 40, 0, 6))
-    from scipy import ndimage
+def __getattr__(name):
+    """`fit_surface` (the surface refinement loop) lives in `rgm.fitters.freeform_surface`."""
+    if name == "fit_surface":
+        from rgm.fitters.freeform_surface import fit_surface
 
-    z = grid[..., 2] if mask is None else np.where(mask, grid[..., 2], np.nan)
-    zs = ndimage.uniform_filter(np.nan_to_num(z, nan=np.nanmean(z)), size=5)
-    zu, zv = np.gradient(zs)
-    zuu, zuv = np.gradient(zu)
-    _, zvv = np.gradient(zv)
-    H = zuu + zvv
-    K = zuu * zvv - zuv**2
-    eps_h, eps_k = 0.1 * np.nanstd(H), 0.1 * np.nanstd(K)
-    label = 3 * np.sign(np.where(np.abs(H) > eps_h, H, 0)) + np.sign(np.where(np.abs(K) > eps_k, K, 0))
-    patches = 0
-    for value in np.unique(label):
-        lab, count = ndimage.label(label == value)
-        sizes = np.bincount(lab.ravel())[1:]
-        patches += int(np.sum(sizes > 0.01 * label.size))
-    return degree + 1 + int(np.clip(np.ceil(np.sqrt(max(patches, 1))), 1, 12))
-
-
-class _SurfaceProblem:
-    """The data of a surface fit and how to solve and measure it on given knot vectors: the separable
-    solve for a full grid, the sparse normal equations otherwise. Residuals are per data point."""
-
-    def __init__(self, points, mask, params, degree, smoothing):
-        pts = np.asarray(points, float)
-        self.degree, self.smoothing, self.grid = degree, smoothing, None
-        if pts.ndim == 3:
-            valid = np.isfinite(pts).all(axis=2)
-            mask = valid if mask is None else (np.asarray(mask, bool) & valid)
-            if mask.sum() < (degree + 1) ** 2:
-                raise GeometryError("too few valid grid points to fit a surface")
-            self.ug, self.vg = grid_parameters(np.where(mask[..., None], pts, 0.0), mask) if params is None else params
-            ii, jj = np.nonzero(mask)
-            self.u, self.v, self.data = self.ug[ii], self.vg[jj], pts[ii, jj]
-            self.grid = pts if mask.all() else None
-            self.shape = pts.shape[:2]
-            self.char = (pts, mask)
-        else:
-            if pts.ndim != 2 or pts.shape[1] != 3 or len(pts) < (degree + 1) ** 2:
-                raise GeometryError(f"need at least {(degree + 1) ** 2} points (n, 3) to fit a surface")
-            if not np.isfinite(pts).all():
-                raise GeometryError("points contain NaN or infinite coordinates")
-            self.u, self.v = plane_parameters(pts)[:2] if params is None else map(np.asarray, params)
-            self.data = pts
-            self.char = (None, None)
-
-    def solve(self, ku, kv):
-        """Control net (nu, nv, 3) and residuals (n,) on the knot vectors ku, kv."""
-        p = self.degree
-        if self.grid is not None:
-            ctrl, Bu, Bv = solve_grid(self.ug, self.vg, self.grid, ku, kv, p, p, self.smoothing)
-            return ctrl, self.residuals(ku, kv, ctrl, (Bu, Bv))
-        ctrl, basis = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing)
-        return ctrl, np.linalg.norm(basis.evaluate(ctrl) - self.data, axis=1)
-
-    def residuals(self, ku, kv, ctrl, bases=None):
-        p = self.degree
-        if self.grid is not None:
-            Bu, Bv = bases or (design_matrix(self.ug, ku, p), design_matrix(self.vg, kv, p))
-            return np.linalg.norm(_grid_eval(Bu, Bv, ctrl) - self.grid, axis=2).ravel()
-        return np.linalg.norm(ScatteredBasis.build(self.u, self.v, ku, kv, p, p).evaluate(ctrl) - self.data, axis=1)
-
-    def worst_per_direction(self, res):
-        """(params_u, worst_u, params_v, worst_v): each data line's worst residual for the span search."""
-        if self.grid is not None:
-            r = res.reshape(self.shape)
-            return self.ug, r.max(axis=1), self.vg, r.max(axis=0)
-        return self.u, res, self.v, res
-
-
-def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
-                n_initial: int | None = None, max_ctrl: int = 40000, statistic: str = "max",
-                smoothing: float = 1e-7, prune: int = 8) -> SurfaceFit:
-    """Least-squares bicubic (by default) B-spline surface of `points` refined by knot insertion.
-
-    points: (n, 3) scattered points, or a grid (rows, cols, 3) with optional `mask` (rows, cols) of valid
-        cells (a range image keeps its grid: the grid gives the parameterisation).
-    params: optional parameters (u, v): per grid row and column for a grid, per point otherwise.
-    tol: tolerance in model units for the `statistic` ("max", or "p99" etc. for scans whose noise makes
-        a maximum meaningless) of the parametric residuals.
-    Refinement stops when the statistic is met, when no span can be split, or when the control net
-    would exceed `max_ctrl`; `SurfaceFit.stopped` says which, and `stats.holds` is False then. The last
-    insertion step is then bisected (the fewest of its knots, worst spans first, that still meet the
-    tolerance); then knots whose neighbourhood is far inside the tolerance are removed in one batch, and
-    up to `prune` single knots, quietest first, each only when the fit still holds without it.
-    """
-    prob = _SurfaceProblem(points, mask, params, degree, smoothing)
-    ku = kv = uniform_knots(degree, n_initial or initial_net_size(*prob.char, degree, len(prob.data)))
-    prev, history, stopped, step = None, [], "", None
-    while True:
-        ctrl, res = prob.solve(ku, kv)
-        stats = fit_stats(res, tol, statistic)
-        if prev is not None and stats.value > prev[3].value:  # keep the refined previous shape
-            ctrl = np.einsum("ia,abd,jb->ijd", refinement_matrix(prev[1], ku, degree), prev[0],
-                             refinement_matrix(prev[2], kv, degree), optimize=True)
-            res = prob.residuals(ku, kv, ctrl)
-            stats = fit_stats(res, tol, statistic)
-        history.append((ctrl.shape[0] * ctrl.shape[1], stats.value))
-        if stats.holds:
-            break
-        pu, wu, pv, wv = prob.worst_per_direction(res)
-        greed = 0.5 if stats.value > 4 * tol else 0.8  # near the goal, split only the worst spans
-        step = (_split_candidates(pu, wu, ku, degree, tol, 0.5 / len(np.unique(pu)), greed),
-                _split_candidates(pv, wv, kv, degree, tol, 0.5 / len(np.unique(pv)), greed))
-        new_u, new_v = step[0][0], step[1][0]
-        if len(new_u) + len(new_v) == 0:
-            stopped = "no knot span can be split further: the data's sampling or noise limits the fit"
-            break
-        if (ctrl.shape[0] + len(new_u)) * (ctrl.shape[1] + len(new_v)) > max_ctrl:
-            stopped = f"control-net limit {max_ctrl} reached"
-            break
-        prev = (ctrl, ku, kv, stats)
-        ku, kv = np.sort(np.r_[ku, new_u]), np.sort(np.r_[kv, new_v])
-    if stats.holds and prev is not None:
-        # the last step may have overshot: bisect (three probes) on how many of its knots, worst first,
-        # are needed to meet the tolerance
-        (cu, eu), (cv, ev) = step
-        order = np.argsort(-np.r_[eu, ev], kind="stable")
-        lo, hi = 0, len(order)
-        for _ in range(3):
-            if hi - lo <= 1:
-                break
-            mid = (lo + hi) // 2
-            take = order[:mid]
-            ku2 = np.sort(np.r_[prev[1], cu[take[take < len(cu)]]])
-            kv2 = np.sort(np.r_[prev[2], cv[take[take >= len(cu)] - len(cu)]])
-            ctrl2, res2 = prob.solve(ku2, kv2)
-            stats2 = fit_stats(res2, tol, statistic)
-            if stats2.holds:
-                hi = mid
-                ku, kv, ctrl, res, stats = ku2, kv2, ctrl2, res2, stats2
-            else:
-                lo = mid
-    if stats.holds and prune:
-        ku, kv, ctrl, res, stats = _prune(prob, ku, kv, ctrl, res, stats, tol, statistic, prune)
-    return SurfaceFit(degree, degree, ku, kv, ctrl, stats, res, tuple(history), stopped)
-
-
-def _neighbourhood_error(x, res, knots, degree):
-    """Interior break points and the worse of the two spans' worst residuals on either side of each."""
-    idx, breaks = _span_index(x, knots, degree)
-    worst = np.zeros(len(breaks) - 1)
-    np.maximum.at(worst, idx, res)
-    return breaks[1:-1], np.maximum(worst[:-1], worst[1:])
-
-
-def _without(knots, degree, drop_values):
-    inner = knots[degree + 1:-degree - 1]
-    keep = ~np.isin(inner, drop_values)
-    return np.r_[knots[:degree + 1], inner[keep], knots[-degree - 1:]]
-
-
-def _prune(prob, ku, kv, ctrl, res, stats, tol, statistic, attempts, slack=0.4):
-    """Knot removal after the tolerance holds: first one batch (every other knot whose neighbouring
-    spans both stay below slack x tol), then single knots, quietest neighbourhood first, `attempts`
-    re-solves in all; each removal is kept only if the re-solved fit still holds."""
-    def candidates(res):
-        pu, wu, pv, wv = prob.worst_per_direction(res)
-        bu, eu = _neighbourhood_error(pu, wu, ku, prob.degree)
-        bv, ev = _neighbourhood_error(pv, wv, kv, prob.degree)
-        return bu, eu, bv, ev
-
-    bu, eu, bv, ev = candidates(res)
-    batch = (bu[(eu < slack * tol) & (np.arange(len(bu)) % 2 == 0)],
-             bv[(ev < slack * tol) & (np.arange(len(bv)) % 2 == 0)])
-    tried = set()
-    for attempt in range(int(attempts) + 1):
-        if attempt == 0:
-            drop_u, drop_v = batch
-            if len(drop_u) + len(drop_v) == 0:
-                continue
-        else:
-            bu, eu, bv, ev = candidates(res)
-            order = [i for i in np.argsort(np.r_[eu, ev], kind="stable")
-                     if (i < len(bu), float(bu[i] if i < len(bu) else bv[i - len(bu)])) not in tried]
-            if not order:
-                break
-            i = order[0]
-            drop_u, drop_v = ((bu[i],), ()) if i < len(bu) else ((), (bv[i - len(bu)],))
-            tried.add((i < len(bu), float(bu[i] if i < len(bu) else bv[i - len(bu)])))
-        ku2, kv2 = _without(ku, prob.degree, drop_u), _without(kv, prob.degree, drop_v)
-        ctrl2, res2 = prob.solve(ku2, kv2)
-        stats2 = fit_stats(res2, tol, statistic)
-        if stats2.holds:
-            ku, kv, ctrl, res, stats = ku2, kv2, ctrl2, res2, stats2
-    return ku, kv, ctrl, res, stats
-
-
-def _grid_eval(Bu, Bv, ctrl):
-    """Surface points on the data grid (rows, cols, 3) from the design matrices: Bu C Bv'."""
-    T = np.stack([(Bu @ ctrl[:, :, k]) for k in range(3)], axis=2)              # (rows, nv, 3)
-    return np.stack([(Bv @ T[:, :, k].T).T for k in range(3)], axis=2)         # (rows, cols, 3)
+        return fit_surface
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -16,14 +16,15 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from rgm.fitters.freeform import (SurfaceFit, design_matrix, fit_surface, grid_parameters,
-                                  plane_parameters)
+from rgm.fitters.freeform import SurfaceFit, design_matrix, grid_parameters, plane_parameters
+from rgm.fitters.freeform_surface import fit_surface
 from rgm.fitters.trimloops import TrimLoops, fit_trim_loops
 
 __all__ = ["FreeformShape", "fit_freeform", "emit_freeform"]
 
 _DEC = 4   # decimals of model-space numbers (mm): 0.1 micrometre
 _UV_DEC = 9
+_PLANE_DEC = 12   # decimals of a cut plane's origin and normal: its ends stay on it to about 1e-10 mm
 
 
 @dataclass
@@ -52,34 +53,9 @@ class FreeformShape:
 
         return np.asarray(closest_point_surface(self.nurbs(), points)[-1])
 
-    def sample_surface(self, spacing: float) -> np.ndarray:
-        """Points on the surface about `spacing` apart, inside the outer loop (holes ignored), (k, 3)."""
-        s = self.nurbs()
-        (u0, u1), (v0, v1) = s.domain
-        ext = np.ptp(self.fit.ctrl.reshape(-1, 3), axis=0).max()
-        n = int(np.clip(ext / max(spacing, 1e-9), 8, 400))
-        u, v = np.meshgrid(np.linspace(u0, u1, n), np.linspace(v0, v1, n), indexing="ij")
-        uv = np.c_[u.ravel(), v.ravel()]
-        if self.loops is not None:
-            poly = np.vstack([_piece_points(p, 50) for p in self.loops.outer])
-            uv = uv[_inside(uv, poly)]
-        return s.evaluate(uv[:, 0], uv[:, 1])
-
 
 def _piece_points(piece, m=200):
     return design_matrix(np.linspace(0, 1, m), piece.knots, piece.degree) @ piece.ctrl
-
-
-def _inside(q: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Even-odd point-in-polygon test for q (m, 2) against a closed polygon (k, 2), vectorised over q."""
-    a, b = poly, np.roll(poly, -1, axis=0)
-    inside = np.zeros(len(q), bool)
-    for (x0, y0), (x1, y1) in zip(a, b):  # loop over polygon edges, arrays over the queries
-        crosses = (y0 > q[:, 1]) != (y1 > q[:, 1])
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = x0 + (q[:, 1] - y0) * (x1 - x0) / (y1 - y0)
-        inside ^= crosses & (q[:, 0] < x)
-    return inside
 
 
 def grid_from_mesh(points: np.ndarray, faces: np.ndarray | None) -> np.ndarray | None:
@@ -94,43 +70,69 @@ def grid_from_mesh(points: np.ndarray, faces: np.ndarray | None) -> np.ndarray |
     return points.reshape(len(points) // width, width, 3)
 
 
+def _links(g: np.ndarray, mask: np.ndarray, jump: float):
+    """4-neighbour pixel pairs of a range grid g (rows, cols, 3) (NaN where `mask` is False), as flat
+    indices (a, b), that are not across a depth jump (farther apart than `jump` times the median step)."""
+    du, dv = np.diff(g, axis=0), np.diff(g, axis=1)
+    step = np.nanmedian(np.r_[np.linalg.norm(du, axis=2).ravel(), np.linalg.norm(dv, axis=2).ravel()])
+    ids = np.arange(mask.size).reshape(mask.shape)
+    pairs = []
+    for d, (lo, hi) in ((du, (np.s_[:-1, :], np.s_[1:, :])), (dv, (np.s_[:, :-1], np.s_[:, 1:]))):
+        near = np.linalg.norm(d, axis=2) <= jump * step               # NaN (invalid neighbour): no link
+        pairs.append((ids[lo][near], ids[hi][near]))
+    return tuple(np.concatenate(x) for x in zip(*pairs))
+
+
+def _components(size: int, a, b, keep) -> np.ndarray:
+    """Component labels (size,) of the graph of links (a, b) among flat pixels `keep`; 0 elsewhere."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    both = keep[a] & keep[b]
+    graph = coo_matrix((np.ones(int(both.sum())), (a[both], b[both])), shape=(size, size))
+    labels = connected_components(graph, directed=False)[1] + 1
+    labels[~keep] = 0
+    return labels
+
+
+def range_specks(grid: np.ndarray, mask: np.ndarray, *, jump: float = 4.0, min_pixels: int = 50) -> np.ndarray:
+    """(rows, cols) bool: valid pixels of a range grid (rows, cols, 3) in pieces of fewer than
+    `min_pixels` pixels once links across depth jumps (`jump` times the median pixel step) are cut:
+    specks (spurious returns, mixed pixels) too small to carry a surface patch."""
+    g = np.where(mask[..., None], grid, np.nan)
+    labels = _components(mask.size, *_links(g, mask, jump), mask.ravel())
+    sizes = np.bincount(labels)
+    return (mask.ravel() & (sizes[labels] < min_pixels)).reshape(mask.shape)
+
+
 def split_patches(grid: np.ndarray, mask: np.ndarray, *, jump: float = 4.0, crease_deg: float = 40.0,
                   min_pixels: int = 200) -> list[np.ndarray]:
     """Split a range grid (rows, cols, 3) at its surface discontinuities: depth jumps (a neighbour
     further than `jump` times the median pixel step) and creases (surface normals of neighbouring
     pixels more than `crease_deg` apart). Returns one boolean mask per patch, largest first; patches
     smaller than `min_pixels` are dropped. The paper: "B-splines are subdivided where discontinuities
-    take place"."""
+    take place".
+
+    A depth jump cuts the link between its two pixels, each staying with its own surface. Pixels at a
+    crease (whose normals mix both sides) are set aside while the 4-connected components are found,
+    then each joins the component of its nearest pixel within two pixels."""
     g = np.where(mask[..., None], grid, np.nan)
-    du = np.diff(g, axis=0)
-    dv = np.diff(g, axis=1)
-    step = np.nanmedian(np.r_[np.linalg.norm(du, axis=2).ravel(), np.linalg.norm(dv, axis=2).ravel()])
-    bad = ~mask.copy()
-    for d, axis in ((du, 0), (dv, 1)):
-        far = ~(np.linalg.norm(d, axis=2) <= jump * step)     # NaN (invalid neighbour) counts as far
-        lo = [slice(None)] * 2
-        hi = [slice(None)] * 2
-        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
-        both_valid = mask[tuple(lo)] & mask[tuple(hi)]
-        cut = far & both_valid
-        bad[tuple(lo)] |= cut
-        bad[tuple(hi)] |= cut
     n = np.cross(np.gradient(g, axis=0), np.gradient(g, axis=1))
     n /= np.linalg.norm(n, axis=2, keepdims=True)
-    cos_limit = np.cos(np.radians(crease_deg))
-    for axis in (0, 1):
-        cos = np.sum(np.take(n, range(1, n.shape[axis]), axis=axis)
-                     * np.take(n, range(0, n.shape[axis] - 1), axis=axis), axis=2)
-        crease = np.nan_to_num(cos, nan=1.0) < cos_limit
-        lo = [slice(None)] * 2
-        hi = [slice(None)] * 2
-        lo[axis], hi[axis] = slice(0, -1), slice(1, None)
-        bad[tuple(lo)] |= crease
-        bad[tuple(hi)] |= crease
-    labels, count = ndimage.label(~bad)
-    sizes = np.bincount(labels.ravel())[1:]
-    order = np.argsort(-sizes)
-    return [labels == k + 1 for k in order if sizes[k] >= min_pixels]
+    crease_px = np.zeros(mask.shape, bool)
+    for lo, hi in ((np.s_[:-1, :], np.s_[1:, :]), (np.s_[:, :-1], np.s_[:, 1:])):
+        cos = np.nan_to_num(np.sum(n[hi] * n[lo], axis=2), nan=1.0)
+        crease = (cos < np.cos(np.radians(crease_deg))) & mask[lo] & mask[hi]
+        crease_px[lo] |= crease
+        crease_px[hi] |= crease
+    labels = _components(mask.size, *_links(g, mask, jump), (mask & ~crease_px).ravel()).reshape(mask.shape)
+    if crease_px.any() and (labels > 0).any():
+        dist, (ii, jj) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+        join = crease_px & (dist <= 2)
+        labels[join] = labels[ii[join], jj[join]]
+    values, sizes = np.unique(labels[labels > 0], return_counts=True)
+    order = np.argsort(-sizes, kind="stable")
+    return [labels == values[k] for k in order if sizes[k] >= min_pixels]
 
 
 def _occupancy(u: np.ndarray, v: np.ndarray, bins: int) -> np.ndarray:
@@ -150,66 +152,125 @@ def _surface_speed(fit: SurfaceFit) -> float:
     return float(max(du, dv, 1e-12))
 
 
+def _inset(t: np.ndarray, margin: float) -> np.ndarray:
+    """Parameters in [0, 1] moved into [margin, 1 - margin]: the surface reaches a little beyond its data,
+    so trimming loops (and a cut's intersection with them) lie strictly inside its domain."""
+    return margin + (1.0 - 2.0 * margin) * t
+
+
 def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statistic: str = "p95",
                  max_ctrl: int = 40000, cuts: bool = True, params=None) -> FreeformShape:
     """Fit a trimmed NURBS surface to a part's points (n, 3), or to a range grid (rows, cols, 3) with
-    its valid mask. `tol` (model units) bounds `statistic` of the residuals. With `cuts`, straight
-    planar boundary pieces become described plane intersections. `params` (u, v), each (n,) in [0, 1],
+    its valid mask. `tol` (model units) bounds `statistic` of the residuals. With `cuts`, planar boundary
+    pieces become described plane intersections, when the intersection follows the data's edge and the
+    control net stays within twice the data's size. `params` (u, v), each (n,) in [0, 1],
     are scattered points' own parameters (a projection onto a base surface, `rgm.fitters.patches`);
     without them the points are projected onto their best-fit plane."""
     if grid is not None:
         mask = np.isfinite(grid).all(axis=2) if mask is None else mask
-        ug, vg = grid_parameters(np.where(mask[..., None], grid, 0.0), mask)
+        ug, vg = (_inset(t, 0.5 / (len(t) - 1)) for t in grid_parameters(np.where(mask[..., None], grid, 0.0), mask))
         fit = fit_surface(grid, tol, mask=mask, params=(ug, vg), statistic=statistic, max_ctrl=max_ctrl)
         region, rows, cols, snap = mask, ug, vg, None
         spacing = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=2)[mask[:, 1:] & mask[:, :-1]]))
     else:
-        u, v = plane_parameters(points)[:2] if params is None else map(np.asarray, params)
-        fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl)
         bins = int(np.clip(np.sqrt(len(points)) / 2, 24, 256))
+        u, v = (_inset(np.asarray(t, float), 0.5 / bins)
+                for t in (plane_parameters(points)[:2] if params is None else params))
+        fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl)
         region = _occupancy(u, v, bins)
         rows = cols = (np.arange(bins) + 0.5) / bins
         snap = np.c_[u, v]
         from scipy.spatial import cKDTree
 
         spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
+        spacing = max(spacing, float(np.ptp(points, axis=0).max()) / bins)   # the edge is known to a raster cell
     loops = fit_trim_loops(region, rows, cols, tol_uv=tol / _surface_speed(fit), snap_to=snap)
     outer = list(loops.outer)
-    if cuts and len(outer) > 1:  # a range image's own edge is where the sensor stopped, not a cut
-        margin = 1.5 / len(rows) if grid is not None else -1.0
+    data = grid[mask] if grid is not None else points
+    size = float(np.ptp(data, axis=0).max())
+    tame = np.ptp(fit.ctrl.reshape(-1, 3), axis=0).max() <= 2 * size   # no wild net beyond the data,
+    if cuts and tame and len(outer) > 1:   # whose intersections would be costly and stray from the data
+        margin = 1.5 / len(rows) if grid is not None else -1.0  # a range image's edge is no cut
         flat = max(tol / 2, 2 * spacing)  # a data boundary is only known to within the point spacing
-        outer = [piece if _on_border(piece, margin) else (_as_cut(piece, fit, flat) or piece) for piece in outer]
+        view = None
+        if grid is not None:              # a range view: its data face the sensor
+            ii, jj = np.nonzero(mask)
+            n = fit.nurbs().normal(ug[ii], vg[jj]).mean(axis=0)
+            view = n / max(np.linalg.norm(n), 1e-300)
+        described = [piece if _on_border(piece, margin) else (_as_cut(piece, fit, flat, size, view) or piece)
+                     for piece in outer]
+        for k in range(len(outer)):   # two cuts in a row meet at a corner no plane describes: keep one
+            if isinstance(described[k], PlanarCut) and isinstance(described[k - 1], PlanarCut):
+                described[k] = outer[k]
+        surface = fit.nurbs()
+        # the data's edge, a pixel staircase whose contour runs half a pixel outside the data, is known to
+        # within about 1.5 point spacings: a described cut must follow it that closely (plus the tolerance)
+        for k, cut in enumerate(described):
+            if isinstance(cut, PlanarCut):
+                cut = _pinned(cut.normal, surface, outer[k - 1].ctrl[-1], outer[(k + 1) % len(outer)].ctrl[0])
+                described[k] = cut if _cut_follows(cut, outer, k, fit, tol + 1.5 * spacing) else outer[k]
+        outer = described
     return FreeformShape(fit, loops, outer, [list(h) for h in loops.holes])
 
 
-def _as_cut(piece, fit: SurfaceFit, flat: float):
-    """A PlanarCut when the piece's 3-D image lies in a plane within `flat`, is long enough to be a
-    deliberate cut (a quarter of the part's size) and crosses the surface at more than 30 degrees;
-    otherwise None. A (nearly) straight piece, whose plane the data cannot fix, takes the plane through
-    its line and the mean surface normal: a cut square to the surface."""
+def _as_cut(piece, fit: SurfaceFit, flat: float, size: float, view=None):
+    """A PlanarCut (the least-squares plane of the piece's 3-D image) when the piece lies in it within
+    `flat`, is long enough to be a deliberate cut (a quarter of the data's size `size`), crosses the
+    surface at more than 30 degrees and, in a range view (`view`: the mean direction the data face),
+    faces the sensor there (within 60 degrees on average: where the surface turns away, its edge is a
+    silhouette, not a cut); otherwise None."""
     uv = _piece_points(piece, 100)
     s = fit.nurbs()
     xyz = s.evaluate(uv[:, 0], uv[:, 1])
     length = np.linalg.norm(np.diff(xyz, axis=0), axis=1).sum()
-    if length < 0.25 * np.ptp(fit.ctrl.reshape(-1, 3), axis=0).max():
+    if length < 0.25 * size:
+        return None
+    normals = s.normal(uv[:, 0], uv[:, 1])
+    if view is not None and np.mean(np.abs(normals @ view)) < 0.5:
         return None
     c = xyz.mean(axis=0)
     _, sv, vt = np.linalg.svd(xyz - c, full_matrices=False)
-    normals = s.normal(uv[:, 0], uv[:, 1])
-    along = (xyz - c) @ vt[0]
-    if np.linalg.norm((xyz - c) - np.outer(along, vt[0]), axis=1).max() <= 3 * flat:
-        n = np.cross(vt[0], normals.mean(axis=0))          # (nearly) straight: the plane is ambiguous,
-        #                                                    take the one through the line and the normal
-    else:
-        n = vt[2]
-        if np.abs((xyz - c) @ n).max() > flat:
-            return None
-    if np.linalg.norm(n) < 1e-9:
+    n = vt[2]        # the plane that fits the piece best (for a nearly straight piece, one of many
+    if np.abs((xyz - c) @ n).max() > flat:   # through its line: `_cut_follows` judges what it describes)
         return None
-    n = n / np.linalg.norm(n)
     if np.mean(np.abs(normals @ n)) > 0.5:                  # nearly tangent: not a cut
         return None
-    return PlanarCut(np.round(c, _DEC), np.round(n, 8))
+    return PlanarCut(c, n)
+
+
+def _pinned(normal, surface, uv_start, uv_end) -> PlanarCut:
+    """The cut plane nearest to `normal` through the surface's points at uv_start and uv_end (the ends of
+    the loop pieces before and after it), so that the intersection meets them and the loop closes."""
+    e0, e1 = surface.evaluate(*np.c_[uv_start, uv_end])
+    d = e1 - e0
+    n = np.asarray(normal, float) - (np.asarray(normal, float) @ d) / max(d @ d, 1e-300) * d
+    return PlanarCut(e0, n / np.linalg.norm(n))
+
+
+def _cut_follows(cut: PlanarCut, pieces, k: int, fit: SurfaceFit, within: float) -> bool:
+    """Whether the intersection of the surface with the cut's plane, from the end of piece k-1 to the
+    start of piece k+1 (as the back ends and `rgm.fitters.freeform_measure` take it; approximated to
+    within / 2), stays within `within` of piece k in space, both ways (model units): the description is
+    the data's boundary."""
+    from scipy.spatial import cKDTree
+
+    from rgm.errors import GeometryError
+    from rgm.fitters.freeform_measure import branch_between
+    from rgm.model import BSplineSurface, IntersectionCurve, Plane
+
+    s = fit.nurbs()
+    surface = BSplineSurface(s)
+    try:
+        branches = IntersectionCurve(surface, Plane(cut.origin, cut.normal), within / 2).uv_curves(surface)
+    except GeometryError:
+        return False
+    if not branches:
+        return False
+    start, end = _piece_points(pieces[k - 1], 2)[-1], _piece_points(pieces[(k + 1) % len(pieces)], 2)[0]
+    uv = branch_between(branches, start, end)
+    mine = _piece_points(pieces[k], 200)
+    a, b = s.evaluate(uv[:, 0], uv[:, 1]), s.evaluate(mine[:, 0], mine[:, 1])
+    return bool(max(cKDTree(a).query(b)[0].max(), cKDTree(b).query(a)[0].max()) <= within)
 
 
 def _on_border(piece, margin: float) -> bool:
@@ -224,51 +285,80 @@ def _num(x: float, dec: int = _DEC) -> str:
     return s if s not in ("-0", "") else "0"
 
 
-def _knots(k: np.ndarray) -> str:
-    return "knots([" + ", ".join(_num(x, _UV_DEC) for x in k) + "])"
+def _printed(values, dec: int) -> tuple[list[str], np.ndarray]:
+    """The numbers as written (`dec` decimals) and as they read back: the model the file describes."""
+    texts = [_num(x, dec) for x in np.ravel(values)]
+    return texts, np.array([float(t) for t in texts]).reshape(np.shape(values))
 
 
-def _net_rows(ctrl: np.ndarray, dec: int, indent: str) -> str:
-    """Net body rows, one row of the control net per line."""
-    rows = [", ".join(" ".join(_num(x, dec) for x in p) for p in row) for row in ctrl]
-    return (",\n" + indent).join(rows)
+def _entries(texts: list[str], width: int) -> list[str]:
+    """Net entries ("x y z") from a flat list of numbers, `width` numbers each."""
+    return [" ".join(texts[i:i + width]) for i in range(0, len(texts), width)]
 
 
-def _curve2(piece) -> str:
-    ctrl = np.round(piece.ctrl, _UV_DEC)
-    pts = ", ".join(" ".join(_num(x, _UV_DEC) for x in p) for p in ctrl)
-    return f"bspline({piece.degree}, {_knots(piece.knots)}, net {len(ctrl)} [{pts}])"
+def _knots(k: np.ndarray):
+    texts, values = _printed(k, _UV_DEC)
+    return "knots([" + ", ".join(texts) + "])", values
 
 
-def emit_freeform(shape: FreeformShape, name: str, suffix: str = ""):
+def _curve2(piece):
+    """`bspline(...)` text of a 2-D loop piece and the model curve it reads back as."""
+    from rgm.geometry import NurbsCurve
+    from rgm.model import BSplineCurve
+
+    ktext, knots = _knots(piece.knots)
+    texts, ctrl = _printed(piece.ctrl, _UV_DEC)
+    text = f"bspline({piece.degree}, {ktext}, net {len(ctrl)} [{', '.join(_entries(texts, 2))}])"
+    return text, BSplineCurve(NurbsCurve(piece.degree, knots, ctrl, None))
+
+
+def _cut(piece: PlanarCut, surf: str, surface, tolerance: float, ends):
+    """`intersect(surface, plane(...))` text and model curve; the plane pinned through the printed
+    surface's points at the printed ends `ends` (uv_start, uv_end) of the neighbouring pieces, written with
+    _PLANE_DEC decimals so that they stay on it (the loop closes at the back ends' precision)."""
+    from rgm.model import IntersectionCurve, Plane
+
+    pinned = _pinned(piece.normal, surface.nurbs(), *ends)
+    (ot, o), (nt, n) = _printed(pinned.origin, _PLANE_DEC), _printed(pinned.normal, _PLANE_DEC)
+    text = f"intersect({surf}, plane(pt({', '.join(ot)}), vec({', '.join(nt)})))"
+    return text, IntersectionCurve(surface, Plane(o, n), tolerance)
+
+
+def emit_freeform(shape: FreeformShape, name: str, suffix: str = "", *, tolerance: float):
     """The `.rgm` bindings of a free-form part: `surface`, its `boundary` and `hole` loops and the trimmed
-    face `name`. Returns an `rgm.fitters.emit.EmittedPart` whose `ideal` is rebuilt from the printed
-    numbers, so the certificate measures exactly the model the file describes."""
+    face `name`. `tolerance` (model units) is the file's (`tolerance` statement: the default accuracy of
+    its intersections). Returns an `rgm.fitters.emit.EmittedPart` whose `ideal` is the trimmed face
+    rebuilt from the printed numbers (`rgm.fitters.freeform_measure.TrimmedNurbs`, as `rgmc verify`
+    compiles it), so the certificate measures exactly the model the file describes."""
     from rgm.fitters.emit import EmittedPart
+    from rgm.fitters.freeform_measure import TrimmedNurbs
+    from rgm.geometry import NurbsSurface
+    from rgm.model import BSplineSurface, Loop, TrimmedFace
 
     f = shape.fit
-    ctrl = np.round(f.ctrl, _DEC)
+    (ku_text, ku), (kv_text, kv) = _knots(f.knots_u), _knots(f.knots_v)
+    texts, ctrl = _printed(f.ctrl, _DEC)
     nu, nv = ctrl.shape[:2]
-    surf = f"surface{suffix}"
+    entries = _entries(texts, 3)
     indent = " " * 8
+    rows = (",\n" + indent).join(", ".join(entries[i * nv:(i + 1) * nv]) for i in range(nu))
+    surf = f"surface{suffix}"
+    surface = BSplineSurface(NurbsSurface(f.degree_u, f.degree_v, ku, kv, ctrl, None))
     bindings = [f"{surf} := bsurface(degree_u: {f.degree_u}, degree_v: {f.degree_v},\n"
-                f"    knots_u: {_knots(f.knots_u)},\n    knots_v: {_knots(f.knots_v)},\n"
-                f"    net: net {nu} x {nv} [\n{indent}{_net_rows(ctrl, _DEC, indent)}]);"]
-    pieces = []
-    for piece in shape.outer:
-        if isinstance(piece, PlanarCut):
-            o, n = piece.origin, piece.normal
-            pieces.append(f"intersect({surf}, plane(pt({', '.join(_num(x) for x in o)}), "
-                          f"vec({', '.join(_num(x, 8) for x in n)})))")
-        else:
-            pieces.append(_curve2(piece))
-    bindings.append(f"boundary{suffix} := loop(\n    " + ",\n    ".join(pieces) + ");")
-    holes = []
+                f"    knots_u: {ku_text},\n    knots_v: {kv_text},\n"
+                f"    net: net {nu} x {nv} [\n{indent}{rows}]);"]
+    outer = [None if isinstance(p, PlanarCut) else _curve2(p) for p in shape.outer]
+    for k, p in enumerate(shape.outer):
+        if isinstance(p, PlanarCut):
+            ends = (outer[k - 1][1].nurbs().ctrl[-1], outer[(k + 1) % len(outer)][1].nurbs().ctrl[0])
+            outer[k] = _cut(p, surf, surface, tolerance, ends)
+    bindings.append(f"boundary{suffix} := loop(\n    " + ",\n    ".join(t for t, _ in outer) + ");")
+    holes, hole_loops = [], []
     for k, hole in enumerate(shape.holes, 1):
+        pieces = [_curve2(p) for p in hole]
         holes.append(f"hole{suffix}_{k}")
-        bindings.append(f"hole{suffix}_{k} := loop(\n    " + ",\n    ".join(_curve2(p) for p in hole) + ");")
+        hole_loops.append(Loop(tuple(c for _, c in pieces)))
+        bindings.append(f"hole{suffix}_{k} := loop(\n    " + ",\n    ".join(t for t, _ in pieces) + ");")
     bindings.append(f"{name} := trim({surf}, outer: boundary{suffix}, holes: [{', '.join(holes)}]);")
-    ideal_fit = SurfaceFit(f.degree_u, f.degree_v, np.round(f.knots_u, _UV_DEC), np.round(f.knots_v, _UV_DEC),
-                           ctrl, f.stats, f.residuals, f.history, f.stopped)
-    ideal = FreeformShape(ideal_fit, shape.loops, shape.outer, shape.holes)
-    return EmittedPart(name, [], bindings, surf, ideal)
+    face = TrimmedFace(surface, Loop(tuple(c for _, c in outer)), tuple(hole_loops))
+    return EmittedPart(name, [], bindings, surf, TrimmedNurbs.from_model(face))

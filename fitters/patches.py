@@ -26,6 +26,8 @@ merged views of a closed or wrapped part:
    Each patch has its own trim from its own data, so the gap is of the order of the trimming loop's
    distance from the data edge (a few point spacings): reported, not closed. Sharing one boundary curve
    (the neighbours' intersection) between patches is not done here.
+5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
+   certificate measured on the printed trimmed surface.
 """
 from __future__ import annotations
 
@@ -39,11 +41,11 @@ from scipy.spatial import cKDTree
 
 from rgm.errors import GeometryError
 from rgm.fitters.freeform import design_matrix
-from rgm.fitters.freeform_part import FreeformShape, emit_freeform, fit_freeform
+from rgm.fitters.freeform_part import FreeformShape, fit_freeform
 from rgm.fitters.normals import pca_normals
 
 __all__ = ["crease_mask", "split_scattered", "base_parameters", "Base", "PatchFit", "Gap", "PatchSet",
-           "fit_patches", "boundary_samples", "g0_gaps", "patches_rgm", "write_patches"]
+           "fit_patches", "boundary_samples", "g0_gaps"]
 
 
 def _points(points) -> np.ndarray:
@@ -116,17 +118,23 @@ def split_scattered(points, normals=None, *, angle_deg: float = 35.0, k: int = 1
     label = np.full(len(points), -1)
     label[keep] = rank[comp]
     # each crease point joins the patch on whose local tangent plane it lies (that of the patch's nearest
-    # smooth point within 4 radius), so neighbouring patches meet at the crease and no point of one face
-    # is pulled into the other
+    # smooth point within 4 radius, its normal averaged over its 8 nearest smooth neighbours: one point's
+    # normal tilts near the band), so neighbouring patches meet at the crease and no point of one face is
+    # pulled into the other
     loose = np.nonzero(label < 0)[0]
     best = np.full(len(loose), np.inf)
     for r in range(len(big)):
         own = np.nonzero(label == r)[0]
-        d, j = cKDTree(points[own]).query(points[loose], distance_upper_bound=4 * radius, workers=-1)
+        tree = cKDTree(points[own])
+        d, j = tree.query(points[loose], distance_upper_bound=4 * radius, workers=-1)
         ok = np.isfinite(d)
         near = own[j[ok]]
+        k = min(8, len(own))
+        around = own[tree.query(points[near], k=k, workers=-1)[1].reshape(len(near), k)]
+        nrm = normals[around]
+        nrm = _unit_rows(np.einsum("mkd,mk->md", nrm, np.sign(np.einsum("mkd,md->mk", nrm, normals[near]))))
         off = np.full(len(loose), np.inf)
-        off[ok] = np.abs(np.einsum("ij,ij->i", points[loose[ok]] - points[near], normals[near]))
+        off[ok] = np.abs(np.einsum("ij,ij->i", points[loose[ok]] - points[near], nrm))
         better = off < best
         best[better] = off[better]
         label[loose[better]] = r
@@ -327,31 +335,3 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int = 150) -
             seams.setdefault((min(i, o), max(i, o)), []).append(dist)
     return [Gap(int(i), int(j), float(np.max(np.concatenate(d))), float(np.percentile(np.concatenate(d), 95)),
                 sum(map(len, d))) for (i, j), d in sorted(seams.items())]
-
-
-# ---------------------------------------------------------------------------------------- emission
-def patches_rgm(result: PatchSet, *, tol: float, inputs=(), options=None, title: str = "patches") -> str:
-    """The `.rgm` text of the patches, `patch_1` .. `patch_n` (each a trimmed surface with its `@fit`
-    certificate), with the measured G0 gaps as notes in the header."""
-    from rgm.fitters.emit import write_rgm
-
-    parts = []
-    for r, p in enumerate(result.patches, 1):
-        part = emit_freeform(p.shape, f"patch_{r}", f"_{r}")
-        c = p.shape.fit.stats     # parametric residuals of the fit; no coverage is measured here
-        part.annotations = [f"@fit(points: {c.points}, max: {c.max:.4f}mm, rms: {c.rms:.4f}mm, p95: {c.p95:.4f}mm, "
-                            f'tol: {c.tol:g}mm, statistic: "{c.statistic}")']
-        parts.append(part)
-    notes = [f"patch_{g.i + 1} | patch_{g.j + 1}: G0 gap max {g.max:.4f} mm, p95 {g.p95:.4f} mm "
-             f"({g.samples} boundary samples)" for g in result.gaps]
-    if result.unassigned:
-        notes.append(f"{result.unassigned} points belong to no patch")
-    notes += result.skipped
-    return write_rgm(parts, inputs=list(inputs), options=dict(options or {}), tol=tol, notes=notes, title=title)
-
-
-def write_patches(path, result: PatchSet, *, tol: float, **kwargs):
-    """Write `patches_rgm` to `path` atomically; returns the path."""
-    from rgm.atomic import write_atomic
-
-    return write_atomic(path, patches_rgm(result, tol=tol, **kwargs))

@@ -2,8 +2,15 @@
 
 `fit_scans` returns the `.rgm` text and a JSON-ready report with per-stage timings; progress goes to
 stderr only when it is a terminal.  Parts classified as cylinder, other_revolution or sphere become
-surfaces of revolution with conic profiles; boxes become exact extruded boxes; ellipsoids and free-form
-parts are reported and not modelled (free-form NURBS fitting is a separate builder).
+surfaces of revolution with conic profiles; boxes become exact extruded boxes.  Every other part
+(free_form, ellipsoid), and a part whose exact shape misses its certificate by more than a tenth of the
+part's smallest extent (the shape does not describe the data: a box around one view of a face, say;
+a bulging carton stays a box that says its certificate fails), becomes trimmed NURBS patches
+(`rgm.fitters.freeform_build`): parameterised by the range grid when the input is one range view, else
+by projection onto base surfaces.
+
+Certificates: every filtered point counts for the emitted part nearest to it
+(`rgm.fitters.certificate.nearest_part`), exactly as `rgmc verify` re-measures.
 """
 from __future__ import annotations
 
@@ -16,9 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
+from rgm.errors import GeometryError
+
 __all__ = ["FitResult", "fit_scans", "fit_points", "sha256_of"]
 
 REVOLUTION_KINDS = ("cylinder", "other_revolution", "sphere")
+#: an exact shape whose certificate fails gives way to free form when its bounded statistic exceeds this
+#: fraction of the part's smallest extent
+EXACT_SLACK = 0.1
+#: range views: pieces of fewer pixels (links cut at depth jumps) are specks, removed by the filter; the
+#: free-form builder fits patches down to this size
+SPECK_PIXELS = 50
 
 
 @dataclass
@@ -74,27 +89,60 @@ def _build(points, cls, tol, seed, max_normals=20000):
 
 
 def _surface_samples(shape, spacing):
-    from rgm.fitters.primitives import BoxFit
-    from rgm.fitters.revolution import sample_revolution
+    from rgm.fitters.revolution import RevolutionFit, sample_revolution
 
-    if isinstance(shape, BoxFit):
-        return shape.sample_surface(spacing)
-    return sample_revolution(shape.profile, shape.frame, spacing)
+    if isinstance(shape, RevolutionFit):
+        return sample_revolution(shape.profile, shape.frame, spacing)
+    return shape.sample_surface(spacing)
+
+
+def _exact(shape, name, suffix, pts, cls, tol, statistic):
+    """The emitted exact shape, or None and why when free form must model the part instead."""
+    from rgm.fitters.certificate import certify
+    from rgm.fitters.emit import emit_part
+
+    part = emit_part(shape, name, suffix, snap=tol / 10)
+    cert = certify(part.ideal.distance(pts), tol, statistic=statistic)
+    centred = pts - pts.mean(axis=0)
+    along = centred @ np.linalg.svd(centred[:: max(1, len(pts) // 20000)], full_matrices=False)[2].T
+    extent = float((np.percentile(along, 99, axis=0) - np.percentile(along, 1, axis=0)).min())
+    if cert.holds or cert.value <= EXACT_SLACK * extent:
+        return part, ""
+    return None, (f"{name}: classified {cls.category} (confidence {cls.confidence:.2f}), but the {cls.category}'s "
+                  f"{statistic} {cert.value:.4f} mm is over {EXACT_SLACK:.0%} of the part's smallest extent "
+                  f"({extent:.1f} mm): the shape does not describe the data, so it is modelled as free-form NURBS")
+
+
+def _freeform_parts(points, idx, grid, name, suffix, tol, statistic):
+    """Emitted trimmed-NURBS patches of one part, their report entries and notes."""
+    from rgm.fitters.freeform_build import fit_freeform_part
+    from rgm.fitters.freeform_part import emit_freeform
+
+    ff = fit_freeform_part(points, idx, tol, statistic=statistic, grid=grid, min_pixels=SPECK_PIXELS)
+    single = len(ff.shapes) == 1
+    parts = [emit_freeform(shape, name if single else f"{name}_{r}", suffix if single else f"{suffix}_{r}",
+                           tolerance=tol) for r, shape in enumerate(ff.shapes, 1)]
+    for part, info in zip(parts, ff.info):
+        info["name"] = part.name
+    return parts, ff.info, [f"{name}: {n}" for n in ff.notes]
 
 
 def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), options=None, stages=None,
-               seed: int = 0, title: str = "part") -> FitResult:
-    """Fit already filtered, registered points (n, 3) in mm: split, classify, build, certify, emit."""
-    from rgm.fitters.certificate import certify, surface_coverage
+               seed: int = 0, title: str = "part", grid=None) -> FitResult:
+    """Fit already filtered, registered points (n, 3) in mm: split, classify, build, certify, emit.
+    `grid` (rows, cols) int: when the points are one range view, the index of each pixel's point (-1 where
+    it has none); free-form parts are then parameterised by it."""
+    from rgm.fitters.certificate import certify, nearest_part, surface_coverage
     from rgm.fitters.classify import classify, spacing as point_spacing, split_parts
-    from rgm.fitters.emit import annotations, emit_part, write_rgm
+    from rgm.fitters.emit import annotations, write_rgm
 
     stages = stages or _Stages(False)
     points = np.asarray(points, float)
     with stages("split"):
         pitch = point_spacing(points)
         parts = split_parts(points)
-    emitted, certificates, notes, report_parts = [], [], [], []
+    emitted, owners, notes, report_parts = [], [], [], []   # owners: (classification, report entry, stop)
+    claimed, free = [], []          # points of exact parts; (classification, entry, idx, name, suffix)
     for k, (idx, se) in enumerate(parts):
         suffix = "" if len(parts) == 1 else f"_{k + 1}"
         name = f"{title}{suffix}"
@@ -108,25 +156,56 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
                                     "center": cls.superellipsoid.center.tolist(),
                                     "quality": cls.superellipsoid.quality}}
         with stages("build"):
-            shape = _build(pts, cls, tol, seed)
-        if shape is None:
-            msg = (f"{name}: classified {cls.category} (confidence {cls.confidence:.2f}); no exact builder for it "
-                   f"yet (free-form NURBS surfaces are a separate step), so it is not modelled")
-            notes.append(msg)
-            entry["modelled"] = False
-            report_parts.append(entry)
-            continue
-        with stages("emit"):
-            part = emit_part(shape, name, suffix, snap=tol / 10)
-        with stages("certify"):
-            dist = part.ideal.distance(pts)
-            cov = surface_coverage(_surface_samples(part.ideal, 2 * pitch), pts, 4 * pitch)
-            cert = certify(dist, tol, statistic=statistic, coverage=cov)
-        part.annotations = annotations(cls, cert, list(sources))
-        emitted.append(part)
-        certificates.append(cert)
-        entry.update(modelled=True, params={n: v for n, v, _ in part.params}, certificate=cert.as_dict())
+            try:
+                shape, why = _build(pts, cls, tol, seed), ""
+            except GeometryError as exc:
+                shape, why = None, f"{name}: the {cls.category} builder found no shape ({exc}): modelled as free-form NURBS"
+            if shape is not None:
+                part, why = _exact(shape, name, suffix, pts, cls, tol, statistic)
+            else:
+                part = None
+        notes += [why] if why else []
+        entry["modelled"] = True
         report_parts.append(entry)
+        if part is not None:
+            entry.update(model="exact", params={n: v for n, v, _ in part.params})
+            emitted.append(part)
+            owners.append((cls, entry, ""))
+            claimed.append(idx)
+        else:
+            free.append((cls, entry, idx, name, suffix))
+    if grid is not None and free:
+        # one range view: its free-form pixels (with any the splitting set aside as specks) are split at
+        # their own discontinuities, whatever parts the superellipsoid splitting made of them
+        cls, entry, _, _, _ = max(free, key=lambda f: len(f[2]))
+        for other in free:
+            other[1]["model"] = "free_form"
+            other[1]["fitted_with"] = entry["name"]
+        pool = np.setdiff1d(np.arange(len(points)), np.concatenate(claimed) if claimed else [])
+        tag = "_free" if claimed else ""   # beside exact parts title_1, ...: the free-form patches title_free_1, ...
+        free = [(cls, entry, pool, title + tag, tag)]
+    for cls, entry, idx, name, suffix in free:
+        with stages("free form"):
+            patches, infos, ff_notes = _freeform_parts(points, idx, grid, name, suffix, tol, statistic)
+        notes += ff_notes
+        entry.update(model="free_form", patches=infos)
+        emitted += patches
+        owners += [(cls, info, info["stopped"]) for info in infos]
+    with stages("certify"):
+        owner, dist = nearest_part([p.ideal for p in emitted], points)
+        certificates, kept = [], []
+        for k, (part, (cls, entry, stopped)) in enumerate(zip(emitted, owners)):
+            if not np.any(owner == k):     # wholly behind its neighbours: nothing to certify it with
+                notes.append(f"{part.name}: no point lies nearest to it; left out")
+                entry["certificate"] = None
+                continue
+            cov = surface_coverage(_surface_samples(part.ideal, 2 * pitch), points, 4 * pitch)
+            cert = certify(dist[owner == k], tol, statistic=statistic, coverage=cov)
+            part.annotations = annotations(cls, cert, list(sources), stopped)
+            entry["certificate"] = cert.as_dict()
+            certificates.append(cert)
+            kept.append(part)
+        emitted = kept
     with stages("emit"):
         text = write_rgm(emitted, inputs=list(sources), options=options or {"tol": tol, "statistic": statistic},
                          tol=tol, notes=notes, title=title)
@@ -136,12 +215,51 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
     return FitResult(text, report, emitted, certificates)
 
 
+def _view_cells(scans):
+    """(rows, cols) index of each pixel's point when the scans are one range view (a range grid, or a
+    mesh that triangulates one row by row), -1 where a pixel has none; else None."""
+    from rgm.fitters.freeform_part import grid_from_mesh
+
+    if len(scans) != 1:
+        return None
+    scan = scans[0]
+    if scan.grid is not None:
+        return scan.grid
+    mesh_grid = grid_from_mesh(scan.points, scan.faces)
+    return None if mesh_grid is None else np.arange(scan.n).reshape(mesh_grid.shape[:2])
+
+
+def filtered_points(scans, scale: float = 1.0):
+    """The points `rgmc fit` models and `rgmc verify` measures: the views' points in their common frame
+    times `scale` (to mm), without statistical outliers and, for one range view, without its specks
+    (pieces of fewer than SPECK_PIXELS pixels once links across depth jumps are cut). Returns
+    (points (n, 3), grid or None: each pixel's index among them, -1 where none; removed counts)."""
+    from rgm.fitters.filters import statistical_outliers
+    from rgm.fitters.freeform_part import range_specks
+
+    points = np.vstack([s.world_points() for s in scans]) * scale
+    keep = ~statistical_outliers(points)
+    removed = {"outliers": int((~keep).sum())}
+    cells = _view_cells(scans)
+    if cells is None:
+        return points[keep], None, removed
+    valid = cells >= 0
+    valid[valid] = keep[cells[valid]]
+    xyz = np.full(cells.shape + (3,), np.nan)
+    xyz[valid] = points[cells[valid]]
+    speck = range_specks(xyz, valid, min_pixels=SPECK_PIXELS)
+    keep[cells[speck]] = False
+    removed["specks"] = int(speck.sum())
+    new_index = np.full(len(points) + 1, -1)          # slot n maps an empty cell (-1) to -1
+    new_index[:-1][keep] = np.arange(int(keep.sum()))
+    return points[keep], new_index[cells], removed
+
+
 def fit_scans(paths, *, tol: float, poses=None, statistic: str = "p95", register: bool = False,
               scale: float = 1.0, progress: bool = True, title: str | None = None) -> FitResult:
     """The whole pipeline from scan files.  `scale` converts the scans' units to mm (1000 for metres).
     Views are taken to be in one frame (their poses from `poses` or a .conf) unless `register`, which
     runs `rgm.fitters.register.register_views` (from those poses when given) and leaves out failed views."""
-    from rgm.fitters.filters import statistical_outliers
     from rgm.fitters.io import ScanError, read_views
 
     stages = _Stages(progress)
@@ -158,14 +276,14 @@ def fit_scans(paths, *, tol: float, poses=None, statistic: str = "p95", register
             registration = [r.to_json() for r in reports]
             scans = [s.replace(pose=r.transform) for s, r in zip(scans, reports) if r.status in ("reference", "ok")]
     with stages("filter"):
-        points = np.vstack([s.world_points() for s in scans]) * scale
-        points = points[~statistical_outliers(points)]
+        points, grid, removed = filtered_points(scans, scale)
     if len(points) < 200:
         raise ScanError(f"{len(points)} points left after filtering: too few to fit a part")
     options = {"tol": f"{tol:g}", "statistic": statistic, "scale": f"{scale:g}", "register": register,
                "poses": str(poses) if poses else "none"}
     result = fit_points(points, tol=tol, statistic=statistic, sources=sources, options=options, stages=stages,
-                        title=title or "part")
+                        title=title or "part", grid=grid)
+    result.report["filtered_out"] = removed
     if registration:
         result.report["registration"] = registration
         dropped = [r["file"] for r in registration if r["status"] not in ("reference", "ok")]

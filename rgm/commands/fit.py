@@ -2,9 +2,10 @@
 
 Runs the fitting pipeline (`rgm.fitters.pipeline`): intake, outlier filtering, registration (only with
 --register; otherwise the views must be in one frame, possibly through --poses), splitting,
-superellipsoid classification, the exact builders, certificates, and writes the `.rgm` procedure
-(checked by the compiler's parser and type checker before it is written) and an optional JSON report
-with per-stage timings.  Exit codes: 0 written, 1 bad input or nothing could be modelled, 2 usage.
+superellipsoid classification, the exact builders or the free-form one (trimmed NURBS patches, by the
+range grid for a single range view), certificates, and writes the `.rgm` procedure (checked by the
+compiler's parser and type checker before it is written) and an optional JSON report with per-stage
+timings.  Exit codes: 0 written, 1 bad input or nothing could be modelled, 2 usage.
 """
 from __future__ import annotations
 
@@ -77,16 +78,27 @@ def run(args) -> int:
         return _fail(str(exc))
     for part in result.report["parts"]:
         line = f"{part['name']}: {part['category']} (confidence {part['confidence']:.2f}, runner-up {part['runner_up']})"
-        if part.get("modelled"):
-            cert = part["certificate"]
+        if part.get("model") == "exact" and part.get("certificate"):
             dims = ", ".join(f"{k} = {v:.4f} mm" for k, v in part["params"].items())
-            state = "holds" if cert["holds"] else "DOES NOT HOLD"
-            line += f"; {dims}; {cert['statistic']} {cert[cert['statistic']]:.4f} mm <= tol {cert['tol']:g}: {state}"
+            line += f"; {dims}; {_verdict(part['certificate'])}"
         print(line, file=sys.stderr)
+        for patch in part.get("patches", []):
+            if patch.get("certificate"):
+                nu, nv = patch["control_net"]
+                stop = f" (refinement stopped: {patch['stopped']})" if patch["stopped"] else ""
+                print(f"  {patch['name']}: free-form NURBS {nu} x {nv} control points, {patch['loops']['holes']} "
+                      f"hole(s), {patch['loops']['cuts']} cut(s); {_verdict(patch['certificate'])}{stop}",
+                      file=sys.stderr)
     for note in result.report["notes"]:
         print(f"rgmc fit: note: {note}", file=sys.stderr)
     print(f"wrote {out}", file=sys.stderr)
     return 0 if result.parts else 1
+
+
+def _verdict(cert: dict) -> str:
+    stat = cert["statistic"]
+    state = "holds" if cert["holds"] else "DOES NOT HOLD"
+    return f"{stat} {cert[stat]:.4f} mm {'<=' if cert['holds'] else '>'} tol {cert['tol']:g}: {state}"
 
 
 def _check_text(text: str, filename: str) -> str:

@@ -1,9 +1,11 @@
 """`rgmc verify part.rgm VIEW... [--poses FILE] [--scale S]`: re-measure a model against its scans.
 
 The file is compiled (parse, check, evaluate: `rgm.loads`); every binding annotated with `@fit` is
-turned into a measurable shape (`rgm.fitters.certificate.shape_from_model`), the scans are read and
-filtered as `rgmc fit` does, each point is given to the nearest annotated part, and the certificate is
-measured again with the tolerance and statistic written in the annotation.  A certificate that did not
+turned into a measurable shape (`rgm.fitters.certificate.shape_from_model`: revolutions, boxes, NURBS
+surfaces and trimmed NURBS faces, measured by closest points restricted to the trim), the scans are read
+and filtered as `rgmc fit` does, each point is given to the nearest annotated part
+(`rgm.fitters.certificate.nearest_part`, as `rgmc fit` certifies), and the certificate is measured again
+with the tolerance and statistic written in the annotation.  A certificate that did not
 hold when fitted (its recorded figure above its tolerance, as on a bulging carton fitted as a box) must
 not get worse: none of its recorded max, rms and p95 may grow by more than 5 % of the tolerance.  Exit codes: 0 every certificate holds, 1 one does not (after a hand edit,
 say) or the input is bad, 2 usage.
@@ -58,13 +60,11 @@ def _fit_annotations(program) -> dict:
 
 
 def run(args) -> int:
-    import numpy as np
-
     import rgm
     from rgm.compiler.diagnostics import CompileError, render
     from rgm.compiler.parser import parse
     from rgm.errors import RgmError
-    from rgm.fitters.certificate import certify, shape_from_model
+    from rgm.fitters.certificate import certify, nearest_part, shape_from_model
 
     try:
         text = open(args.model, encoding="utf-8").read()
@@ -81,20 +81,17 @@ def run(args) -> int:
         return _fail(f"{args.model} has no @fit certificate to verify")
     try:
         shapes = {name: shape_from_model(model.objects[name]) for name in claims if name in model.objects}
-        from rgm.fitters.filters import statistical_outliers
         from rgm.fitters.io import read_views
+        from rgm.fitters.pipeline import filtered_points
 
-        scans = read_views(args.views, args.poses)
-        points = np.vstack([s.world_points() for s in scans]) * args.scale
-        points = points[~statistical_outliers(points)]
+        points = filtered_points(read_views(args.views, args.poses), args.scale)[0]
     except (RgmError, ValueError, OSError, KeyError) as exc:
         return _fail(str(exc))
     names = list(shapes)
-    dist = np.array([shapes[n].distance(points) for n in names])     # (parts, n)
-    owner = np.argmin(dist, axis=0)
+    owner, dist = nearest_part([shapes[n] for n in names], points)
     failed = 0
     for k, name in enumerate(names):
-        d = dist[k, owner == k]
+        d = dist[owner == k]
         if len(d) == 0:
             print(f"{name}: no scan point lies nearest to it: FAILS", file=sys.stderr)
             failed += 1
@@ -109,8 +106,9 @@ def run(args) -> int:
             # p95) may grow by more than 5 % of the tolerance
             ok = all(getattr(cert, key) <= value + 0.05 * claim["tol"] for key, value in rec.items())
             note = " (did not hold when fitted; recorded " + ", ".join(f"{k} {v:.4f}" for k, v in rec.items()) + " mm)"
+        verdict = "FAILS" if not ok else "holds" if cert.holds else "no worse than recorded"
         print(f"{name}: {cert.points} points, max {cert.max:.4f} mm, rms {cert.rms:.4f} mm, p95 {cert.p95:.4f} mm; "
-              f"{cert.statistic} {cert.value:.4f} mm <= tol {cert.tol:g} mm{note}: {'holds' if ok else 'FAILS'}",
-              file=sys.stderr)
+              f"{cert.statistic} {cert.value:.4f} mm {'<=' if cert.holds else '>'} tol {cert.tol:g} mm{note}: "
+              f"{verdict}", file=sys.stderr)
         failed += not ok
     return 1 if failed else 0

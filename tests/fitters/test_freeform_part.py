@@ -1,5 +1,6 @@
 """Free-form parts (issue 8): trimmed NURBS with loops from the data, planar cuts kept as described
-intersections, `.rgm` that checks and evaluates, and the paper's face mask to 0.4 mm."""
+intersections, `.rgm` that checks and evaluates, the paper's face mask (honestly short of 0.4 mm at its
+sampling) and a full-resolution bunny range view to 0.4 mm."""
 from pathlib import Path
 
 import numpy as np
@@ -30,7 +31,7 @@ def test_range_grid_with_a_hole_becomes_a_trimmed_surface_with_its_loops():
     shape = fit_freeform(None, 0.05, grid=grid, mask=mask, statistic="max")
     assert shape.fit.stats.holds and shape.fit.stats.max <= 0.05
     assert len(shape.holes) == 1
-    part = emit_freeform(shape, "patch")
+    part = emit_freeform(shape, "patch", tolerance=0.05)
     text = write_rgm([part], inputs=[], options={}, tol=0.05)
     model = loads(text)
     face = model.objects["patch"]
@@ -52,7 +53,7 @@ def test_planar_cut_is_kept_as_a_described_intersection():
     assert len(cuts) == 1
     edge = pts[xy[:, 0] > 24.5]  # the data along the cut lies in the described plane
     assert np.abs((edge - cuts[0].origin) @ cuts[0].normal).max() < 1.0
-    text = write_rgm([emit_freeform(shape, "cut_part")], inputs=[], options={}, tol=0.05)
+    text = write_rgm([emit_freeform(shape, "cut_part", tolerance=0.05)], inputs=[], options={}, tol=0.05)
     assert "intersect(surface, plane(" in text
     face = loads(text).objects["cut_part"]
     lazy = [p for p in face.outer.pieces if isinstance(p, IntersectionCurve)]
@@ -67,39 +68,40 @@ def test_grid_is_recovered_from_a_scanner_mesh():
     assert np.median(step) == pytest.approx(0.0033, abs=3e-4)  # 3.2-3.4 mm scan-line pitch, metres
 
 
-def test_face_mask_meets_0_4mm():
-    """The paper's face mask (Figure 5 b): a tensor-product NURBS surface whose certificate (the 95th
-    percentile of the residuals after filtering, stated in the file) meets T = 0.4 mm."""
+def test_face_mask_stops_at_the_approximation_limit_and_says_so():
+    """The paper's face mask (Figure 5 b) at its 3.3-4.4 mm scan-line pitch: the face's detail is as fine
+    as its sampling, so the 95th percentile of the residuals reaches T = 0.4 mm only by a net about as
+    dense as the data (an interpolation; it predicts withheld points far worse, test_freeform_fit.py).
+    The fit stops at two data lines per knot span, says so, and does not hold; what it reaches there is
+    measured on the printed surface."""
     scan = read_scan(DATA / "fran" / "fran_cut.ply")
     grid = grid_from_mesh(scan.points * 1000.0, scan.faces)
     shape = fit_freeform(None, 0.4, grid=grid, statistic="p95")
-    assert shape.fit.stats.holds and shape.fit.stats.p95 <= 0.4
-    assert shape.fit.n_ctrl < grid.shape[0] * grid.shape[1]  # an approximation, not an interpolation
-    text = write_rgm([emit_freeform(shape, "face")], inputs=[], options={}, tol=0.4)
+    n = grid.shape[0] * grid.shape[1]
+    assert not shape.fit.stats.holds and "approximation limit" in shape.fit.stopped
+    assert shape.fit.n_ctrl < 0.35 * n                 # an approximation, not an interpolation
+    part = emit_freeform(shape, "face", tolerance=0.4)
+    d = part.ideal.distance(grid.reshape(-1, 3))
+    assert 0.4 < np.percentile(d, 95) <= shape.fit.stats.p95 + 1e-9   # closest points: at most the residual
+    text = write_rgm([part], inputs=[], options={}, tol=0.4)
     assert not [d for d in rgm.loads(text).diagnostics if d.is_error]
 
 
-SHARED = Path(__file__).resolve().parents[2].parent / "shared" / "data"
-
-
-@pytest.mark.skipif(not (SHARED / "stanford-bunny" / "bun000.ply").exists(), reason="needs ../shared/data")
-def test_bunny_range_view_patches_meet_0_4mm():
-    """A bunny range view (bun000 at full resolution, the body's 160 x 200 pixels): split at its depth
-    jumps and creases into patches, each a trimmed NURBS surface whose p95 residual meets T = 0.4 mm."""
+def test_bunny_range_view_at_full_resolution_meets_0_4mm():
+    """A window of the bunny's raw range image at the scanner's 0.75 mm pitch (tests/data/bunny): split
+    at its creases and depth jumps into trimmed NURBS patches whose 95th percentile closest-point
+    distance, on the printed surfaces, meets T = 0.4 mm with a net far smaller than the data."""
     from rgm.fitters.freeform_part import split_patches
 
-    scan = read_scan(SHARED / "stanford-bunny" / "bun000.ply")
-    crop = np.s_[170:330, 150:350]
-    ids = scan.grid[crop]
-    valid = ids >= 0
-    grid = np.full(ids.shape + (3,), np.nan)
-    grid[valid] = scan.points[ids[valid]] * 1000.0
-    patches = split_patches(grid, valid, min_pixels=100)
-    assert patches and patches[0].sum() > 0.7 * valid.sum()
-    rows, cols = np.nonzero(patches[0].any(1))[0], np.nonzero(patches[0].any(0))[0]
-    box = np.s_[rows.min():rows.max() + 1, cols.min():cols.max() + 1]
-    shape = fit_freeform(None, 0.4, grid=grid[box], mask=patches[0][box], statistic="p95")
-    assert shape.fit.stats.holds and shape.fit.stats.points == patches[0].sum()
-    assert shape.fit.n_ctrl < 0.25 * patches[0].sum()
-    text = write_rgm([emit_freeform(shape, "bunny")], inputs=[], options={}, tol=0.4)
-    assert not [d for d in rgm.loads(text).diagnostics if d.is_error]
+    scan = read_scan(DATA / "bunny" / "bun000_crop.ply")
+    grid = np.full(scan.grid.shape + (3,), np.nan)
+    grid[scan.mask] = scan.points[scan.grid[scan.mask]] * 1000.0
+    patches = split_patches(grid, scan.mask, min_pixels=50)
+    assert patches and sum(p.sum() for p in patches) > 0.98 * scan.mask.sum()
+    for k, m in enumerate(patches):
+        rows, cols = np.nonzero(m.any(axis=1))[0], np.nonzero(m.any(axis=0))[0]
+        box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+        shape = fit_freeform(None, 0.4, grid=grid[box], mask=m[box], statistic="p95")
+        assert shape.fit.stats.points == m.sum() and shape.fit.n_ctrl < 0.25 * m.sum()
+        part = emit_freeform(shape, f"bunny_{k}", tolerance=0.4)
+        assert np.percentile(part.ideal.distance(grid[m]), 95) <= 0.4

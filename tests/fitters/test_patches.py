@@ -13,8 +13,10 @@ from scipy.spatial import cKDTree
 import rgm
 from rgm.errors import GeometryError
 from rgm.fitters.filters import statistical_outliers
+from rgm.fitters.emit import write_rgm
+from rgm.fitters.freeform_build import patch_part
 from rgm.fitters.freeform_part import emit_freeform
-from rgm.fitters.patches import base_parameters, fit_patches, split_scattered, write_patches
+from rgm.fitters.patches import base_parameters, fit_patches, split_scattered
 from rgm.fitters.normals import pca_normals
 from rgm.model import TrimmedFace
 
@@ -22,6 +24,14 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from recovery_scans import mesh_views, random_rotation  # noqa: E402
 
 MUSTARD = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "ycb" / "006_mustard_bottle_textured.obj"
+
+
+def patches_text(result, tol, title="patches"):
+    """The `.rgm` text of a PatchSet as `rgmc fit` writes free-form patches (patch_1, ...), the measured
+    G0 gaps as header notes; and the emitted parts (their `ideal` rebuilt from the printed numbers)."""
+    part = patch_part(result)
+    parts = [emit_freeform(shape, f"patch_{k}", f"_{k}", tolerance=tol) for k, shape in enumerate(part.shapes, 1)]
+    return write_rgm(parts, inputs=[], options={}, tol=tol, notes=part.notes, title=title), parts
 
 
 def box_points(rng, n, half, noise):
@@ -91,7 +101,7 @@ def test_box_patches_meet_the_tolerance_and_every_edge_has_a_measured_gap():
           f"({gaps.max() / spacing:.1f} spacings), {seconds:.1f} s")
 
 
-def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two(tmp_path):
+def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two():
     rng = np.random.default_rng(11)
     r, h = 25.0, 60.0
     p, part = capped_cylinder(rng, 10000, r, h, 0.05)
@@ -103,15 +113,14 @@ def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two(tmp_path)
     for q in result.patches:
         s = q.shape
         assert s.fit.stats.holds
-        on = s.sample_surface(2.0)
+        on = emit_freeform(s, "p", tolerance=0.2).ideal.sample_surface(2.0)
         if q.base.kind == "cylinder":   # the fitted surface is the true cylinder within the tolerance
             err = np.abs(np.hypot(on[:, 0], on[:, 1]) - r)
         else:
             err = np.abs(np.abs(on[:, 2]) - h / 2)
         assert np.percentile(err, 95) < 0.2
     assert all(np.isfinite(g.max) and g.max > 0 for g in result.gaps)
-    out = write_patches(tmp_path / "cyl.rgm", result, tol=0.2)
-    text = out.read_text()
+    text, _ = patches_text(result, 0.2)
     model = rgm.loads(text)
     assert not [d for d in model.diagnostics if d.is_error]
     assert all(isinstance(model.objects[f"patch_{k}"], TrimmedFace) for k in range(1, 5))
@@ -144,7 +153,7 @@ def test_bad_input_gives_clear_errors():
 
 
 @pytest.mark.skipif(not MUSTARD.exists(), reason=f"shared data folder absent: {MUSTARD}")
-def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
+def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges():
     """Six scan-like views of the YCB mustard bottle (mm, 1.5 mm pitch, 0.05 mm noise, 2 % outliers
     removed by the statistical filter) -> patches split at the cap and shoulder edges, each a trimmed
     NURBS meeting 1 mm at p95; the .rgm checks clean."""
@@ -162,13 +171,12 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     assert not any(zz.min() < 100 and zz.max() > 175 for zz in z)
     assert any(zz.min() > 150 for zz in z) and any(zz.max() < 10 for zz in z)  # a cap patch, a bottom patch
     assert result.unassigned < 0.01 * len(p)
-    out = write_patches(tmp_path / "mustard.rgm", result, tol=1.0, title="mustard")
-    model = rgm.loads(out.read_text())
+    text, parts = patches_text(result, 1.0, title="mustard")
+    model = rgm.loads(text)
     assert not [d for d in model.diagnostics if d.is_error]
     assert all(isinstance(model.objects[f"patch_{k}"], TrimmedFace) for k in range(1, len(result) + 1))
-    # the printed (rounded) surface of the largest patch is as close to its points as the fit said
-    ideal = emit_freeform(result.shapes[0], "body").ideal
-    assert np.percentile(ideal.distance(p[result.patches[0].indices[::10]]), 95) <= 1.0
+    # the printed (rounded) trimmed surface of the largest patch is as close to its points as the fit said
+    assert np.percentile(parts[0].ideal.distance(p[result.patches[0].indices[::10]]), 95) <= 1.0
     gaps = np.array([g.max for g in result.gaps])
     assert len(gaps) >= len(result) - 1 and np.all(np.isfinite(gaps))
     print(f"mustard: {len(p)} points, {len(result)} patches, ctrl {[s.fit.n_ctrl for s in result.shapes]}, "

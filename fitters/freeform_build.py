@@ -1,0 +1,101 @@
+"""The free-form builder of `rgmc fit`: a part's points become trimmed NURBS patches.
+
+- A part of a single range view keeps the view's grid (`grid`: the index of each pixel's point, -1 where
+  the pixel holds none): the part's pixels are split at depth jumps and creases
+  (`rgm.fitters.freeform_part.split_patches`; the paper: "B-splines are subdivided where discontinuities
+  take place"), and each patch is a tensor-product NURBS parameterised by the grid, trimmed to its valid
+  pixels; straight planar boundary pieces inside the image become described `intersect(surface, plane)`
+  cuts (`fit_freeform`).
+- Other data (merged views, meshes) are scattered: `rgm.fitters.patches.fit_patches` splits them at
+  creases, parameterises each patch by projection onto a base surface (plane or cylinder) and fits a
+  trimmed NURBS to it; the G0 gaps between neighbouring patches are measured and reported.
+
+Every patch's surface meets the tolerance's statistic, or says why it stopped short (`stopped`).
+Lengths are in model units (mm).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rgm.errors import GeometryError
+from rgm.fitters.freeform_part import PlanarCut, fit_freeform, split_patches
+
+__all__ = ["FreeformPart", "fit_freeform_part", "patch_part"]
+
+
+@dataclass
+class FreeformPart:
+    """shapes: FreeformShape per patch, largest first; info: per patch, what the report says beside its
+    certificate; notes: what the .rgm header and the report say about the part as a whole."""
+
+    shapes: list = field(default_factory=list)
+    info: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+
+
+def _describe(shape, parameterisation: str, points: int, seconds: float) -> dict:
+    f = shape.fit
+    return {"parameterisation": parameterisation, "points": int(points),
+            "control_net": [int(f.ctrl.shape[0]), int(f.ctrl.shape[1])], "control_points": int(f.n_ctrl),
+            "refinement": [[int(n), float(v)] for n, v in f.history], "stopped": f.stopped,
+            "residual": {"statistic": f.stats.statistic, "value": f.stats.value, "max": f.stats.max},
+            "loops": {"outer_pieces": len(shape.outer), "holes": len(shape.holes),
+                      "cuts": sum(isinstance(p, PlanarCut) for p in shape.outer)},
+            "seconds": float(seconds)}
+
+
+def _grid_patches(points, idx, grid, tol, statistic, min_pixels) -> FreeformPart | None:
+    mask = np.isin(grid, idx)
+    if mask.sum() < 16:
+        return None
+    xyz = np.full(grid.shape + (3,), np.nan)
+    xyz[grid >= 0] = points[grid[grid >= 0]]
+    masks = split_patches(xyz, mask, min_pixels=min_pixels) or [mask]
+    out = FreeformPart()
+    for m in masks:
+        rows, cols = np.nonzero(m.any(axis=1))[0], np.nonzero(m.any(axis=0))[0]
+        box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+        t0 = time.perf_counter()
+        try:
+            shape = fit_freeform(None, tol, grid=xyz[box], mask=m[box], statistic=statistic)
+        except GeometryError as exc:
+            out.notes.append(f"{int(m.sum())} pixels not fitted: {exc}")
+            continue
+        out.shapes.append(shape)
+        out.info.append(_describe(shape, "range grid", m.sum(), time.perf_counter() - t0))
+    left = int(mask.sum() - sum(m.sum() for m in masks))
+    if left:
+        out.notes.append(f"{left} pixels at depth jumps and creases (or in specks) belong to no patch")
+    return out
+
+
+def fit_freeform_part(points, idx, tol: float, *, statistic: str = "p95", grid=None,
+                      min_pixels: int = 50) -> FreeformPart:
+    """Trimmed NURBS patches for the part `idx` (indices into points (n, 3), mm) whose `statistic` of the
+    residuals is within `tol` (mm). `grid` (rows, cols): the range image behind `points`, if they are one
+    view; patches of fewer than `min_pixels` pixels are left out. Scattered data go to `fit_patches`."""
+    from rgm.fitters.patches import fit_patches
+
+    idx = np.asarray(idx)
+    if grid is not None:
+        part = _grid_patches(points, idx, grid, tol, statistic, min_pixels)
+        if part is not None and part.shapes:
+            return part
+    return patch_part(fit_patches(points[idx], tol, statistic=statistic))
+
+
+def patch_part(result) -> FreeformPart:
+    """The FreeformPart of a `rgm.fitters.patches.PatchSet`: its patches, what each is, and notes on the
+    measured G0 gaps between neighbours (patches numbered from 1), unassigned and skipped points."""
+    out = FreeformPart(notes=list(result.skipped))
+    for p in result.patches:
+        out.shapes.append(p.shape)
+        out.info.append(_describe(p.shape, f"projection onto a {p.base.kind}", len(p.indices), p.seconds))
+    out.notes += [f"patches {g.i + 1} | {g.j + 1}: G0 gap max {g.max:.4f} mm, p95 {g.p95:.4f} mm "
+                  f"({g.samples} boundary samples)" for g in result.gaps]
+    if result.unassigned:
+        out.notes.append(f"{result.unassigned} points belong to no patch")
+    return out
