@@ -128,7 +128,9 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
     sample : source points used in the first stage, which hands over when the step or the cost change
     falls below 10 x the final thresholds;
     final_sample : source points (a random subset, Rusinkiewicz & Levoy 2001) of the final stage, which
-    runs to convergence; more points hardly change the pose, whose error is bias, not variance;
+    runs to convergence (a step under 1 % of the point spacing, far below the pose's own uncertainty, or
+    a relative change of the cost under `tol`); more points hardly change the pose, whose error is bias,
+    not variance;
     kernel : Tukey's constant in units of the MAD scale of the residuals (3.0 trades a little
     efficiency for less pull from the rim of the overlap).
     """
@@ -183,7 +185,7 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
         step_len = np.linalg.norm(x[:3]) * radius + np.linalg.norm(x[3:])
         max_dist = max(min_dist, min(max_dist, float(dist.mean() + 3 * dist.std())))
         loose = 1.0 if full else 10.0                   # the first stage hands over at 10x looser thresholds
-        if step_len < 3e-3 * loose * spacing or abs(prev_cost - cost) <= tol * loose * cost:
+        if step_len < 1e-2 * loose * spacing or abs(prev_cost - cost) <= tol * loose * cost:
             if full:
                 converged = True
                 break
