@@ -231,8 +231,9 @@ class _Lowering:
                 ext = max(ext, float(np.abs(c.ctrl).max()))
         return 1.5 * ext
 
-    def _loop_piece(self, piece, surface):
-        """(uv NurbsCurve or model object (2-D), model-space NurbsCurve or model object (3-D), crtn)."""
+    def _loop_piece(self, piece, surface, near=None):
+        """(uv NurbsCurve or model object (2-D), model-space NurbsCurve or model object (3-D), crtn);
+        `near`: the (u, v) the previous piece ended at, which picks the side of a closed surface's seam."""
         if isinstance(piece, IntersectionCurve):
             branches = piece.approximate(self.tol)
             if len(branches) != 1:
@@ -245,13 +246,14 @@ class _Lowering:
         if piece.dim == 2:
             return piece, model_curve(surface, piece, ftol), 0
         exact = piece.nurbs() if isinstance(piece, (Circle, CircularArc)) else piece   # see `_piece`
-        return parameter_curve(surface, exact, ftol), piece, 0
+        return parameter_curve(surface, exact, ftol, near), piece, 0
 
     def _loop(self, loop: Loop, surface, sde: int) -> int:
         """142: CRTN, SPTR, BPTR (2-D curve or 102 of them), CPTR (3-D), PREF."""
-        uv, xyz, kinds = [], [], []
+        uv, xyz, kinds, near = [], [], [], None
         for piece in loop.pieces:
-            b, c, crtn = self._loop_piece(piece, surface)
+            b, c, crtn = self._loop_piece(piece, surface, near)
+            near = np.asarray(b.end, float)
             uv.append(self._piece(b, 2))
             xyz.append(self._piece(c, 3))
             kinds.append((crtn, piece.dim if not isinstance(piece, IntersectionCurve) else 0))

@@ -196,9 +196,12 @@ def model_curve(surface, piece, tol: float) -> NurbsCurve:
     return fit_parametric(func, np.concatenate([breaks, crossings]), tol, np.concatenate([cont, crossing_cont]))
 
 
-def parameter_curve(surface, piece, tol: float) -> NurbsCurve:
+def parameter_curve(surface, piece, tol: float, near=None) -> NurbsCurve:
     """The 2-D image in `surface`'s parameter space of the model-space curve `piece` (a model object
-    written as a NURBS entity, or a NurbsCurve) lying on it, with the same parameter (exact on a plane)."""
+    written as a NURBS entity, or a NurbsCurve) lying on it, with the same parameter (exact on a plane).
+    On a surface closed in u or v (a full revolution, to within `tol`), points on the seam take the side of the curve's
+    neighbouring points, or, for a piece along the seam, the side of `near` (the (u, v) where the
+    previous loop piece ended), so that the image is continuous and the loop's images join."""
     curve = _nurbs(piece)
     if isinstance(surface, Plane):
         return NurbsCurve(curve.degree, curve.knots, surface.coordinates(curve.ctrl), curve.weights)
@@ -207,10 +210,33 @@ def parameter_curve(surface, piece, tol: float) -> NurbsCurve:
     # parameter tolerance from the surface's extent: a deviation tol in space is about tol/size in (u, v)
     size = float(np.ptp(nurbs.bbox(), axis=0).max()) or 1.0
     scale = max(u1 - u0, v1 - v0)
+    closed = [np.abs(nurbs.ctrl[0] - nurbs.ctrl[-1]).max() <= tol,        # (to within the fit's tolerance:
+              np.abs(nurbs.ctrl[:, 0] - nurbs.ctrl[:, -1]).max() <= tol]   # other writers round 2 pi)
 
     def func(t):
         u, v, _pts, _dist = nurbs.closest_point(curve.evaluate(t))
-        return np.column_stack([u, v])
+        uv = np.column_stack([u, v])
+        for axis, (lo, hi) in enumerate(nurbs.domain):
+            if closed[axis]:
+                uv[:, axis] = _seam_side(uv[:, axis], lo, hi, None if near is None else near[axis])
+        return uv
 
     breaks, cont = _knot_breaks(curve)
     return fit_parametric(func, breaks, tol * scale / size, cont)
+
+
+def _seam_side(x, lo: float, hi: float, hint) -> np.ndarray:
+    """Parameters (m,) along a curve (in order) with the seam values (lo or hi, either is the same point)
+    set to the side of the nearest preceding (else following) off-seam sample, or of `hint` when all
+    lie on the seam."""
+    eps = 1e-9 * (hi - lo)
+    seam = (x - lo < eps) | (hi - x < eps)
+    if not seam.any():
+        return x
+    if seam.all():
+        return np.full_like(x, hi if hint is not None and abs(hint - hi) < abs(hint - lo) else lo)
+    idx = np.arange(len(x))
+    before = np.maximum.accumulate(np.where(seam, -1, idx))
+    after = np.minimum.accumulate(np.where(seam, len(x), idx)[::-1])[::-1]
+    ref = x[np.where(before >= 0, before, after)]
+    return np.where(seam, np.where(ref > 0.5 * (lo + hi), hi, lo), x)

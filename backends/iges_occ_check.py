@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["OccIges", "occ_read_iges", "occ_write_iges", "sample_shape"]
+__all__ = ["OccIges", "occ_read_iges", "occ_write_iges", "shape_points"]
 
 
 @dataclass
@@ -76,41 +76,43 @@ def occ_write_iges(shapes, path, units: str = "MM", brep_mode: int = 0) -> None:
         raise OSError(f"OpenCASCADE could not write {path}")
 
 
-def sample_shape(shape, samples: int = 7):
-    """(faces, edges) of a TopoDS shape: per face (surface type, wire count, points (k, 3) on a
-    samples x samples grid over its UV bounds, the (u, v) (k, 2)); per edge points (samples, 3)."""
+def shape_points(shape, samples: int = 7) -> np.ndarray:
+    """Points (k, 3) on a TopoDS shape's own geometry: per face the nodes of a samples x samples grid over
+    its (u, v) bounds that lie inside the face (BRepClass_FaceClassifier), evaluated on its surface; per
+    edge `samples` points of surface ∘ pcurve on its first face (the 3-D curve of a free edge)."""
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Curve, BRepAdaptor_Surface
+    from OCP.BRepClass import BRepClass_FaceClassifier
     from OCP.BRepTools import BRepTools
-    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_WIRE
+    from OCP.gp import gp_Pnt2d
+    from OCP.TopAbs import TopAbs_EDGE, TopAbs_FACE, TopAbs_IN
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopoDS import TopoDS
 
-    faces, edges = [], []
+    out = []
     exp = TopExp_Explorer(shape, TopAbs_FACE)
     while exp.More():
         face = TopoDS.Face_s(exp.Current())
-        adaptor = BRepAdaptor_Surface(face, False)
-        umin, umax, vmin, vmax = BRepTools.UVBounds_s(face)
-        us, vs = np.linspace(umin, umax, samples), np.linspace(vmin, vmax, samples)
-        uv = np.array([(u, v) for u in us for v in vs])
-        pts = np.array([[p.X(), p.Y(), p.Z()] for p in (adaptor.Value(u, v) for u, v in uv)])
-        wires = TopExp_Explorer(face, TopAbs_WIRE)
-        count = 0
-        while wires.More():
-            count += 1
-            wires.Next()
-        kind = str(adaptor.GetType()).split("_")[-1].split(".")[-1]
-        faces.append((kind, count, pts, uv))
+        surface = BRepAdaptor_Surface(face)
+        u0, u1, v0, v1 = BRepTools.UVBounds_s(face)
+        for u in np.linspace(u0, u1, samples):
+            for v in np.linspace(v0, v1, samples):
+                if BRepClass_FaceClassifier(face, gp_Pnt2d(u, v), 1e-9).State() == TopAbs_IN:
+                    p = surface.Value(u, v)
+                    out.append((p.X(), p.Y(), p.Z()))
+        edges = TopExp_Explorer(face, TopAbs_EDGE)
+        while edges.More():
+            edge = TopoDS.Edge_s(edges.Current())
+            if not BRep_Tool.Degenerated_s(edge):
+                c = BRepAdaptor_Curve(edge, face)
+                out += [(p.X(), p.Y(), p.Z()) for p in (c.Value(t) for t in np.linspace(c.FirstParameter(),
+                                                                                       c.LastParameter(), samples))]
+            edges.Next()
         exp.Next()
-    exp = TopExp_Explorer(shape, TopAbs_EDGE)
+    exp = TopExp_Explorer(shape, TopAbs_EDGE, TopAbs_FACE)     # free edges (curves)
     while exp.More():
-        edge = TopoDS.Edge_s(exp.Current())
-        if BRep_Tool.Degenerated_s(edge):
-            exp.Next()
-            continue
-        curve = BRepAdaptor_Curve(edge)
-        ts = np.linspace(curve.FirstParameter(), curve.LastParameter(), samples)
-        edges.append(np.array([[p.X(), p.Y(), p.Z()] for p in (curve.Value(t) for t in ts)]))
+        c = BRepAdaptor_Curve(TopoDS.Edge_s(exp.Current()))
+        out += [(p.X(), p.Y(), p.Z()) for p in (c.Value(t) for t in np.linspace(c.FirstParameter(),
+                                                                               c.LastParameter(), samples))]
         exp.Next()
-    return faces, edges
+    return np.array(out).reshape(-1, 3)

@@ -1,5 +1,7 @@
 """`rgmc import` of IGES files written by OpenCASCADE (IGESControl_Writer, Faces mode) from CadQuery
-shapes: the .rgm text compiles back to the same geometry within 1e-9 x the part's size."""
+shapes, then `rgmc compile -t iges` and `-t step` of the imported `.rgm`: the files read back (by
+OpenCASCADE, and the IGES also by rgm) are the original geometry within 1e-9 x the part's size, in both
+directions (points of the original on the result, points of the result on the original)."""
 from __future__ import annotations
 
 import numpy as np
@@ -20,61 +22,75 @@ def _shapes():
     }
 
 
-def _surfaces(model):
-    out = []
-    for obj in model.exported():
-        for f in getattr(obj, "faces", [obj]):
-            out.append(getattr(f, "surface", f))
-    return out
-
-
-def _distance(points, surfaces):
-    from rgm.model import Plane
-
-    best = np.full(len(points), np.inf)
-    for s in surfaces:
-        d = np.abs(s.signed_distance(points)) if isinstance(s, Plane) else s.nurbs().closest_point(points)[3]
-        best = np.minimum(best, d)
-    return best
-
-
-def _loop_curves(model, size):
-    """3-D NurbsCurves of every loop piece (parameter-space pieces mapped through their surface)."""
-    from rgm.backends.iges_curves import model_curve
+def _loop_points(model, count: int = 9) -> np.ndarray:
+    """rgm's own evaluation of every trimming curve of a model's faces: C(t) for model-space pieces,
+    S(B(t)) for parameter-space ones."""
+    from rgm.backends.iges_curves import surface_points
 
     out = []
     for obj in model.exported():
-        for f in getattr(obj, "faces", [obj]):
-            for loop in f.loops():
-                for p in loop.pieces:
-                    for q in getattr(p, "pieces", [p]):
-                        c = q.nurbs()
-                        out.append(c if c.dim == 3 else model_curve(f.surface, c, 1e-11 * size))
-    return out
+        for face in getattr(obj, "faces", [obj]):
+            for piece in (p for loop in face.loops() for p in loop.pieces):
+                c = piece.nurbs()
+                p = c.evaluate(np.linspace(*c.domain, count))
+                out.append(p if c.dim == 3 else surface_points(face.surface, p[:, 0], p[:, 1]))
+    return np.concatenate(out)
 
 
-@pytest.mark.parametrize("name", ["box", "cylinder", "fillet", "loft"])
-def test_import_of_opencascade_iges_compiles_to_the_same_geometry(tmp_path, capsys, name):
-    import rgm
-    from rgm.backends.iges_occ_check import occ_write_iges, sample_shape
+def _pcurve_gap(shape, count: int = 9) -> float:
+    """How far a shape's edges (3-D curves) are from their pcurves on its faces (max over samples)."""
+    from OCP.BRepAdaptor import BRepAdaptor_Curve
+
+    from rgm.backends.iges_occ_compare import _edges, _explore, _xyz
+
+    gap = 0.0
+    for face in _explore(shape, "face"):
+        for edge in _edges(face):
+            on, c3 = BRepAdaptor_Curve(edge, face), BRepAdaptor_Curve(edge)
+            t = np.linspace(on.FirstParameter(), on.LastParameter(), count)
+            gap = max(gap, float(np.linalg.norm(_xyz(on.Value(x) for x in t) - _xyz(c3.Value(x) for x in t),
+                                                axis=1).max()))
+    return gap
+
+
+#: backends/occ.py (outside the IGES back end) builds a trimmed face's pcurves of 3-D loop edges by
+#: projecting them onto the surface's NURBS form; on the imported cylinder (a revolution of 2 pi to 10
+#: digits, edges meeting at its seam) the projected pcurves do not join, and `-t step` fails
+STEP_SEAM = pytest.mark.xfail(strict=True, reason="occ.py: pcurves projected across a closed revolution's seam "
+                                                  "do not join end to start")
+CASES = [(n, t) for n in ("box", "cylinder", "fillet", "loft") for t in ("iges", "step")]
+
+
+@pytest.mark.parametrize("name, target", [pytest.param(n, t, marks=STEP_SEAM) if (n, t) == ("cylinder", "step")
+                                          else (n, t) for n, t in CASES])
+def test_import_compile_and_read_back_gives_the_original_geometry(tmp_path, capsys, name, target):
+    from rgm.backends.iges_occ_check import occ_read_iges, occ_write_iges, shape_points
+    from rgm.backends.iges_read import read_iges_file
+    from rgm.backends.occ import distances_to_shape, faces_of, read_step
     from rgm.cli import main
 
-    shape = _shapes()[name]
-    igs = tmp_path / f"{name}.igs"
-    occ_write_iges([shape.wrapped], igs)
-    out = tmp_path / f"{name}.rgm"
-    assert main(["import", str(igs), "-o", str(out)]) == 0
-    assert "warning" not in capsys.readouterr().err
-    model = rgm.load(out)
-    occ_faces, occ_edges = sample_shape(shape.wrapped, 6)  # the original shape, not a read-back
-    bb = shape.BoundingBox()
+    original = _shapes()[name]
+    bb = original.BoundingBox()
     size = max(bb.xlen, bb.ylen, bb.zlen)
-    faces = shape.Faces()
-    assert len(occ_faces) == len(faces) == sum(len(getattr(o, "faces", [o])) for o in model.exported())
-    surfaces = _surfaces(model)
-    for kind, _wires, pts, _uv in occ_faces:
-        assert _distance(pts, surfaces).max() <= 1e-9 * size, kind
-    curves = _loop_curves(model, size)
-    for pts in occ_edges:
-        d = np.min([c.closest_point(pts)[2] for c in curves], axis=0)
-        assert d.max() <= 1e-9 * size
+    igs, rgm_file = tmp_path / f"{name}.igs", tmp_path / f"{name}.rgm"
+    occ_write_iges([original.wrapped], igs)
+    assert main(["import", str(igs), "-o", str(rgm_file)]) == 0
+    assert "warning" not in capsys.readouterr().err
+    out = tmp_path / f"back.{target}"
+    assert main(["compile", str(rgm_file), "-t", target, "-o", str(out)]) == 0, capsys.readouterr().err
+    if target == "iges":
+        occ = occ_read_iges(out)
+        assert occ.fails == [] and occ.roots == occ.transferred
+        result = occ.shape
+        ours = read_iges_file(out)
+        assert ours.ok, ours.messages()
+        # the trimming curves in OpenCASCADE's file are its pcurves, which on lofted B-spline faces lie up to
+        # 1.8e-8 mm (within its edge tolerance 1e-7) from its own 3-D edges: the original is no tighter
+        limit = max(1e-9 * size, _pcurve_gap(original.wrapped))
+        assert distances_to_shape(_loop_points(ours.model), original.wrapped).max() <= limit
+    else:
+        result = read_step(out)
+    assert len(faces_of(result)) == len(original.Faces())
+    there = distances_to_shape(shape_points(original.wrapped, 5), result).max()
+    back = distances_to_shape(shape_points(result, 5), original.wrapped).max()
+    assert max(there, back) <= 1e-9 * size, (there, back)
