@@ -197,14 +197,16 @@ def _occ_intersection(curve):
 
 
 def _project2d(curve2d, p):
-    """(distance, parameter) of the closest point of a Geom2d curve to the 2-D point p."""
+    """(distance, parameter) of the closest point of a bounded Geom2d curve to the 2-D point p: the
+    nearest orthogonal foot or, when p lies beyond the curve (no foot, or a nearer end), an end."""
     from OCP.Geom2dAPI import Geom2dAPI_ProjectPointOnCurve
     from OCP.gp import gp_Pnt2d
 
-    proj = Geom2dAPI_ProjectPointOnCurve(gp_Pnt2d(*map(float, p)), curve2d)
-    if proj.NbPoints() == 0:
-        return np.inf, None
-    return proj.LowerDistance(), proj.LowerDistanceParameter()
+    point = gp_Pnt2d(*map(float, p))
+    ends = [(point.Distance(curve2d.Value(t)), t) for t in (curve2d.FirstParameter(), curve2d.LastParameter())]
+    proj = Geom2dAPI_ProjectPointOnCurve(point, curve2d)
+    feet = [(proj.LowerDistance(), proj.LowerDistanceParameter())] if proj.NbPoints() else []
+    return min(feet + ends)
 
 
 # --- trimmed faces -------------------------------------------------------------------------------
@@ -286,7 +288,13 @@ def _pcurve_pieces(loop, surface, tol):
         a = prev[0].Value(prev[2])
         b = nxt[0].Value(nxt[1])
         best = min(branches, key=lambda br: _project2d(br, (a.X(), a.Y()))[0] + _project2d(br, (b.X(), b.Y()))[0])
-        ta, tb = _project2d(best, (a.X(), a.Y()))[1], _project2d(best, (b.X(), b.Y()))[1]
+        (_, ta), (_, tb) = _project2d(best, (a.X(), a.Y())), _project2d(best, (b.X(), b.Y()))
+        geom = surface_geom(surface)
+        gap = max(geom.Value(p.X(), p.Y()).Distance(geom.Value(q.X(), q.Y()))
+                  for p, q in ((a, best.Value(ta)), (b, best.Value(tb))))
+        if gap > tol:
+            raise BackendError(f"{_label(inter)}: the loop's neighbouring pieces end {gap:.3g} away from the "
+                               f"intersection (more than the tolerance {tol:g}); they must meet it")
         if ta > tb:
             best = best.Reversed()
             ta, tb = best.ReversedParameter(ta), best.ReversedParameter(tb)

@@ -116,6 +116,20 @@ def test_trimmed_plane_has_its_area():
     assert props.Mass() == pytest.approx(12.0, rel=1e-12)
 
 
+def cut_skin():
+    """A bicubic bump with x = 50 u exactly (control x at the Greville abscissae) and its lazy
+    intersection with the plane x = 25 (the line u = 0.5 in its parameters)."""
+    from rgm.model import IntersectionCurve
+
+    n, p = 8, 3
+    k = np.concatenate([np.zeros(p + 1), np.arange(1, n - p) / (n - p), np.ones(p + 1)])
+    greville = np.array([k[i + 1:i + p + 1].mean() for i in range(n)])
+    x, y = np.meshgrid(50 * greville, 50 * greville, indexing="ij")
+    skin = BSplineSurface(NurbsSurface(p, p, k, k, np.stack([x, y, 6 * np.sin(x / 9) * np.cos(y / 13)], axis=-1)))
+    cut = IntersectionCurve(skin, Plane([25, 0, 0], [1, 0, 0]), 0.01)
+    return skin, cut
+
+
 def test_intersection_trim_is_cut_by_opencascade_on_the_plane():
     """A bump surface with x = 50 u exactly (control x at the Greville abscissae), trimmed by a loop whose
     one side is the lazy intersection with the plane x = 25: OpenCASCADE's own intersector computes that
@@ -129,14 +143,7 @@ def test_intersection_trim_is_cut_by_opencascade_on_the_plane():
     from OCP.TopExp import TopExp_Explorer
     from OCP.TopoDS import TopoDS
 
-    from rgm.model import IntersectionCurve
-
-    n, p = 8, 3
-    k = np.concatenate([np.zeros(p + 1), np.arange(1, n - p) / (n - p), np.ones(p + 1)])
-    greville = np.array([k[i + 1:i + p + 1].mean() for i in range(n)])
-    x, y = np.meshgrid(50 * greville, 50 * greville, indexing="ij")
-    skin = BSplineSurface(NurbsSurface(p, p, k, k, np.stack([x, y, 6 * np.sin(x / 9) * np.cos(y / 13)], axis=-1)))
-    cut = IntersectionCurve(skin, Plane([25, 0, 0], [1, 0, 0]), 0.01)
+    skin, cut = cut_skin()
     loop = Loop((Line([0, 0], [0.5, 0]), cut, Line([0.5, 1], [0, 1]), Line([0, 1], [0, 0])))
     shape = occ.to_shape(TrimmedFace(skin, loop))
     assert cut.computed == ()                      # rgm's marcher never ran: OpenCASCADE cut it
@@ -158,6 +165,13 @@ def test_intersection_trim_is_cut_by_opencascade_on_the_plane():
             on_plane += np.abs(xs - 25).max() <= 1e-6
         exp.Next()
     assert on_plane >= 1
+
+
+def test_loop_pieces_that_miss_the_intersection_are_a_clear_error():
+    skin, cut = cut_skin()
+    loop = Loop((Line([0, 0], [0.4, 0]), cut, Line([0.5, 1], [0, 1]), Line([0, 1], [0, 0])))
+    with pytest.raises(BackendError, match="must meet"):
+        occ.to_shape(TrimmedFace(skin, loop))
 
 
 def test_shell_of_six_patches_is_sewn_into_a_unit_cube():
