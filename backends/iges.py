@@ -37,6 +37,7 @@ from rgm.model import (
     Plane, Polyline, Revolution, RuledSurface, Shell, TrimmedFace,
 )
 
+from .iges_brep import NotClosed, write_msbo
 from .iges_curves import arc_placement, model_curve, parameter_curve
 from .iges_format import (
     PHYSICAL, UNIT_FLAGS, USE_DEFINITION, USE_PARAMETRIC, Entity, GlobalSection, IgesFile, iges_date,
@@ -60,12 +61,13 @@ class _Lowering:
     """Walks the model and appends entities to an IgesFile (one instance per file)."""
 
     def __init__(self, model, iges: IgesFile, *, nurbs_only: bool, pcurve_preference: str, tol: float,
-                 color=None):
+                 color=None, brep: bool = False):
         if pcurve_preference not in PCURVE_PREFERENCES:
             raise BackendError(f"unknown pcurve preference {pcurve_preference!r}; choose "
                                f"{', '.join(PCURVE_PREFERENCES)}")
         self.model, self.iges, self.tol = model, iges, tol
         self.nurbs_only, self.pref = nurbs_only, PCURVE_PREFERENCES[pcurve_preference]
+        self.brep = brep              # trim_entity 186: closed shells and solids as manifold solid B-reps
         self.memo: dict = {}          # (id(obj), dim, as_nurbs) -> DE of its dependent entity
         self.keep: list = []          # objects whose ids key the memo (kept alive)
         self.extent = 0.0             # max |coordinate| written (Global parameter 20)
@@ -95,6 +97,11 @@ class _Lowering:
         return pts
 
     def root(self, obj) -> int:
+        if self.brep and isinstance(obj, (Revolution, Shell)):
+            try:
+                return write_msbo(self, obj, True)
+            except NotClosed:   # not a closed solid: as with 144
+                pass
         return self._lower(obj, root=True, dim=getattr(obj, "dim", 3))
 
     def child(self, obj, dim: int = 3, use: int = 0) -> int:
@@ -204,11 +211,11 @@ class _Lowering:
         return self._add(obj, Entity(120, [axis, gen, float(start), float(min(end, _TWO_PI))]), root)
 
     # -- trimmed faces -----------------------------------------------------------------------
-    def _trimmed(self, face: TrimmedFace, root: bool) -> int:
+    def trim_surface(self, face: TrimmedFace) -> int:
+        """DE of the surface a trimmed face's loops live on: its 128 (a plane's spans its loops, a
+        revolution's is its exact NURBS form, whose (u, v) rgm's trimming curves use)."""
         surface = face.surface
-        size = None
-        if isinstance(surface, Plane):
-            size = self._plane_size(face)
+        size = self._plane_size(face) if isinstance(surface, Plane) else None
         key = (id(surface), "trim-base", size)
         if key not in self.memo:
             self.keep.append(surface)
@@ -216,7 +223,11 @@ class _Lowering:
                 self.memo[key] = self._surface(surface, False, size=size, as_nurbs=True)
             else:
                 self.memo[key] = self.child(surface)
-        sde = self.memo[key]
+        return self.memo[key]
+
+    def _trimmed(self, face: TrimmedFace, root: bool) -> int:
+        surface = face.surface
+        sde = self.trim_surface(face)
         outer = self._loop(face.outer, surface, sde) if face.outer is not None else 0
         holes = [self._loop(h, surface, sde) for h in face.holes]
         return self._add(face, Entity(144, [sde, int(face.outer is not None), len(holes), outer, *holes]), root)
@@ -366,15 +377,15 @@ def iges_file(model, *, file_name: str = "model.igs", nurbs_only: bool = False, 
               pcurve_preference: str = "auto", tol: float | None = None, color=None, author: str = "",
               organization: str = "") -> IgesFile:
     """The `IgesFile` of `model`'s exported objects, ready for `to_text()` / `to_bytes()`."""
-    if str(trim_entity) != "144":
-        raise BackendError(f"trim entity {trim_entity!r} is not supported; rgm writes trimmed faces as 144 "
-                           f"(the 186 manifold solid B-rep is not implemented)")
+    if str(trim_entity) not in ("144", "186"):
+        raise BackendError(f"trim entity {trim_entity!r} is not supported; choose 144 (trimmed surfaces) or 186 "
+                           f"(manifold solid B-rep of closed shells and solids)")
     tol = float(model.tolerance if tol is None else tol)
     if not tol > 0:
         raise BackendError("the IGES resolution (tolerance) must be positive")
     iges = IgesFile(GlobalSection())
     lowering = _Lowering(model, iges, nurbs_only=nurbs_only, pcurve_preference=pcurve_preference, tol=tol,
-                         color=color)
+                         color=color, brep=str(trim_entity) == "186")
     for obj in model.exported():
         lowering.root(obj)
     iges.global_section = _global(model, file_name, tol, lowering.extent, author, organization)

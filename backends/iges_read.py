@@ -3,8 +3,9 @@
 Supported entities: 100 arc/circle, 102 composite, 106 forms 11/12/13/63 (polylines), 108 form 0
 (unbounded plane), 110 line (form 0), 112/114 parametric splines (exact B-splines), 116 point, 120 surface of revolution, 124 transformation (applied through DE field 7), 126 and 128
 (rational B-splines; parameter sub-ranges are split off exactly), 142 curve on surface, 144 trimmed
-surface, 402 forms 1/7 (group → shell), 406 form 15 (names) and 314 (colour, read and ignored: the
-model has no colours). Anything else is reported by type, form and DE number (`IgesImport.unsupported`);
+surface, 186/514/510/508/504/502 (manifold solid B-rep → shell or revolution, `iges_brep_read`), 402
+forms 1/7 (group → shell), 406 form 15 (names) and 314 (colour, read and ignored: the model has no
+colours). Anything else is reported by type, form and DE number (`IgesImport.unsupported`);
 entities whose data are invalid are reported with the reason (`IgesImport.problems`); nothing is
 dropped silently. A malformed file raises IgesFormatError naming the record.
 
@@ -25,13 +26,15 @@ from rgm.model import (
     Polyline, Revolution, Shell, TrimmedFace,
 )
 
+from .iges_brep_read import BREP_TYPES, BrepReading
 from .iges_format import IgesFormatError
 from .iges_parse import IgesData, parse_iges
+from .iges_shapes import as_arc, as_plane, sub_curve, sub_surface
 
 __all__ = ["IgesImport", "read_iges", "read_iges_file", "SUPPORTED"]
 
-SUPPORTED = {0, 100, 102, 106, 108, 110, 112, 114, 116, 120, 124, 126, 128, 142, 144, 314, 402, 406}
-_NOT_OBJECTS = {0, 124, 314, 406}
+SUPPORTED = {0, 100, 102, 106, 108, 110, 112, 114, 116, 120, 124, 126, 128, 142, 144, 314, 402, 406} | BREP_TYPES
+_NOT_OBJECTS = {0, 124, 314, 406, 502, 504, 508}
 #: unit lengths in mm of IGES units the language does not have (converted to mm on import)
 _TO_MM = {"ft": 304.8, "mi": 1609344.0, "km": 1e6, "mil": 0.0254, "um": 1e-3, "uin": 2.54e-5}
 
@@ -64,7 +67,7 @@ class IgesImport:
         return out + self.problems + self.notes
 
 
-class _Reader:
+class _Reader(BrepReading):
     def __init__(self, data: IgesData):
         self.d = data
         self.memo: dict = {}
@@ -81,6 +84,8 @@ class _Reader:
         fixed = {100: 7, 110: 6, 116: 4, 120: 4, 124: 12, 142: 5, 314: 4}
         if t in fixed:
             return fixed[t]
+        if t in BREP_TYPES:
+            return self.brep_own_count(de, t)
         if t == 112:
             return 4 + (d.int(de, 4) + 1) * 13
         if t == 114:
@@ -113,6 +118,8 @@ class _Reader:
                 out += d.ints(de, 2, 3)
             elif e.type == 144:
                 out += [d.int(de, 1), d.int(de, 4)] + d.ints(de, 5, d.int(de, 3))
+            elif e.type in BREP_TYPES:
+                out += self.brep_children(de, e.type)
         except IgesFormatError:
             return []
         return [c for c in out if c > 0]
@@ -120,7 +127,10 @@ class _Reader:
     def name(self, de: int) -> str | None:
         """The 406 form 15 name among the entity's property pointers, else the DE label."""
         d = self.d
-        own = self.own_count(de)
+        try:
+            own = self.own_count(de)
+        except IgesFormatError:
+            own = None
         toks = d.params[de]
         if own is not None and len(toks) > own + 1:
             try:
@@ -244,8 +254,8 @@ class _Reader:
         w = vals[k + m + 2:k + m + 2 + n]
         ctrl = vals[k + m + 2 + n:k + m + 2 + 4 * n].reshape(n, 3)[:, :dim]
         v0, v1 = vals[-2:]
-        curve = _sub_curve(NurbsCurve(m, knots, ctrl, None if poly == 1 else w), v0, v1)
-        arc = _as_arc(curve) if self.d.entries[de].form == 2 else None
+        curve = sub_curve(NurbsCurve(m, knots, ctrl, None if poly == 1 else w), v0, v1)
+        arc = as_arc(curve) if self.d.entries[de].form == 2 else None
         return arc if arc is not None else BSplineCurve(curve)
 
     def _e128(self, de, dim):
@@ -261,9 +271,9 @@ class _Reader:
         w = vals[o:o + nu * nv].reshape(nv, nu).T
         ctrl = vals[o + nu * nv:o + 4 * nu * nv].reshape(nv, nu, 3).transpose(1, 0, 2)
         u0, u1, v0, v1 = vals[-4:]
-        s = _sub_surface(NurbsSurface(m1, m2, ku, kv, ctrl, None if poly == 1 else w), u0, u1, v0, v1)
+        s = sub_surface(NurbsSurface(m1, m2, ku, kv, ctrl, None if poly == 1 else w), u0, u1, v0, v1)
         if self.d.entries[de].form == 1:
-            plane = _as_plane(s)
+            plane = as_plane(s)
             if plane is not None:
                 return plane
         return BSplineSurface(s)
@@ -375,67 +385,6 @@ class _Reader:
         return Shell(tuple(self.get(m) for m in self.d.ints(de, 2, self.d.int(de, 1))))
 
 
-def _sub_curve(curve, v0: float, v1: float):
-    """`curve` restricted to [v0, v1] when that is a proper sub-range of its domain (exact split)."""
-    a, b = curve.domain
-    if a < v0 < b:
-        curve = curve.split(v0)[1]
-    if a < v1 < b and v1 < curve.domain[1]:
-        curve = curve.split(v1)[0]
-    return curve
-
-
-def _as_arc(curve):
-    """The Circle or CircularArc a 126 form 2 (circular arc) is, when its points lie on one circle to
-    1e-12 of its radius (centre and normal from three points in order, so the sense is kept); else None."""
-    p = curve.evaluate(np.linspace(*curve.domain, 33))
-    p3 = np.column_stack([p, np.zeros(len(p))]) if p.shape[1] == 2 else p
-    a, b, c = p3[0], p3[11], p3[22]
-    n = np.cross(b - a, c - b)
-    if not np.linalg.norm(n) > 0:
-        return None
-    n /= np.linalg.norm(n)
-    ab, ac = b - a, c - a
-    centre = a + (np.cross(n, ab) * (ac @ ac) - np.cross(n, ac) * (ab @ ab)) / (2 * np.cross(ab, ac) @ n)
-    r = np.linalg.norm(p3 - centre, axis=1)
-    if np.ptp(r) > 1e-12 * r[0] or np.abs((p3 - centre) @ n).max() > 1e-12 * r[0]:
-        return None
-    dim = p.shape[1]
-    if dim == 2:
-        n = np.array([0.0, 0.0, np.sign(n[2])])
-    if np.linalg.norm(p3[-1] - p3[0]) <= 1e-12 * r[0]:
-        return Circle(centre[:dim], n, float(r.mean()))
-    return CircularArc(centre[:dim], n, float(np.linalg.norm(p3[0] - centre)), p[0], p[-1])
-
-
-def _sub_surface(s, u0, u1, v0, v1):
-    (a, b), (c, e) = s.domain
-    for direction, t0, t1, lo, hi in (("u", u0, u1, a, b), ("v", v0, v1, c, e)):
-        if lo < t0 < hi:
-            s = s.split(direction, t0)[1]
-        dom = s.domain[0 if direction == "u" else 1]
-        if dom[0] < t1 < dom[1]:
-            s = s.split(direction, t1)[0]
-    return s
-
-
-def _as_plane(s):
-    """A Plane when the bilinear 128 is parametrised by plane coordinates (isometric, orthogonal);
-    trimming curves then keep their meaning. None otherwise."""
-    if (s.degree_u, s.degree_v, s.nu, s.nv) != (1, 1, 2, 2) or s.is_rational:
-        return None
-    (u0, u1), (v0, v1) = s.domain
-    c = s.ctrl
-    x = (c[1, 0] - c[0, 0]) / (u1 - u0)
-    y = (c[0, 1] - c[0, 0]) / (v1 - v0)
-    size = max(float(np.abs(c).max()), 1.0)
-    if (abs(np.linalg.norm(x) - 1) > 1e-12 or abs(np.linalg.norm(y) - 1) > 1e-12 or abs(x @ y) > 1e-12
-            or np.abs(c[1, 1] - c[0, 1] - c[1, 0] + c[0, 0]).max() > 1e-12 * size):
-        return None
-    origin = c[0, 0] - u0 * x - v0 * y
-    return Plane(origin, np.cross(x, y), x)
-
-
 def read_iges(text: str, source: str | None = None) -> IgesImport:
     """Read IGES text into an `IgesImport` (model + unsupported entities + problems)."""
     data = parse_iges(text)
@@ -445,7 +394,8 @@ def read_iges(text: str, source: str | None = None) -> IgesImport:
     objects: dict = {}
     exports = []
     kinds = {100: "curve", 102: "curve", 106: "curve", 110: "curve", 112: "curve", 126: "curve", 142: "curve",
-             116: "point", 108: "plane", 114: "surface", 120: "surface", 128: "surface", 144: "face", 402: "shell"}
+             116: "point", 108: "plane", 114: "surface", 120: "surface", 128: "surface", 144: "face", 402: "shell",
+             186: "solid", 510: "face", 514: "shell"}
     for de in reader.roots():
         e = data.entries[de]
         try:

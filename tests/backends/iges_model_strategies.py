@@ -67,15 +67,15 @@ def intersection(rng, name, tol):
     return IntersectionCurve(*((a, b) if rng.integers(0, 2) else (b, a)), tol, name=name)
 
 
-def similarity(rng) -> np.ndarray:
-    """A random 4x4 similarity: rotation about a random axis, uniform scale, a mirror half the time,
-    then a translation."""
+def similarity(rng, scale: bool = True) -> np.ndarray:
+    """A random 4x4 similarity: rotation about a random axis, uniform scale (unless not `scale`), a
+    mirror half the time, then a translation."""
     k = _unit(rng)
     kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     angle = rng.uniform(0, 2 * np.pi)
     r = np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx
     m = np.eye(4)
-    m[:3, :3] = r * rng.uniform(0.5, 2.0) @ np.diag([-1.0 if rng.integers(0, 2) else 1.0, 1.0, 1.0])
+    m[:3, :3] = r * (rng.uniform(0.5, 2.0) if scale else 1.0) @ np.diag([-1.0 if rng.integers(0, 2) else 1.0, 1.0, 1.0])
     m[:3, 3] = rng.uniform(-10, 10, 3)
     return m
 
