@@ -79,13 +79,12 @@ def _loop_pieces(loop, surface, patch, tol) -> list:
             out.append(piece)
         elif piece.dim == 2:
             out.append(_curve_piece(patch, piece.nurbs()))
-        else:
+        elif isinstance(surface, Plane):   # plane coordinates: an exact affine image of the curve
             c = piece.nurbs()
-            t0, t1 = c.domain
-            if isinstance(surface, Plane):
-                out.append(Piece(patch, lambda s, c=c: surface.coordinates(c.evaluate(t0 + s * (t1 - t0)))))
-            else:
-                out.append(Piece(patch, lambda s, c=c: patch.closest(c.evaluate(t0 + s * (t1 - t0)))[0]))
+            out.append(Piece(patch, lambda s, c=c, t=c.domain: surface.coordinates(c.evaluate(t[0] + s * (t[1] - t[0])))))
+        else:
+            out.append(piece.nurbs())
+    _project_onto(out, patch, tol)
     for k, p in enumerate(out):
         if not isinstance(p, Piece):
             closed = len(out) == 1
@@ -93,6 +92,73 @@ def _loop_pieces(loop, surface, patch, tol) -> list:
             next_start = None if closed else out[(k + 1) % len(out)].uv(np.array([0.0]))[0]
             out[k] = _intersection_pieces(patch, p, surface, prev_end, next_start, tol)
     return out
+
+
+def _seams(patch, tol) -> list:
+    """[(axis, lo, hi)] for each parameter direction in which the patch closes up: S(lo, t) = S(hi, t)
+    within `tol` (default 1e-7 x the patch's size) along the whole seam (a full revolution, a closed
+    B-spline surface)."""
+    t = np.linspace(0.0, 1.0, 9)
+    (u0, u1), (v0, v1) = patch.domain
+    if not tol:
+        uu, vv = np.meshgrid(u0 + t * (u1 - u0), v0 + t * (v1 - v0), indexing="ij")
+        probe = patch.evaluate(uu.ravel(), vv.ravel())
+        tol = 1e-7 * float(np.linalg.norm(probe.max(axis=0) - probe.min(axis=0)))
+    seams = []
+    for axis, (lo, hi), (a, b) in ((0, (u0, u1), (v0, v1)), (1, (v0, v1), (u0, u1))):
+        other = a + t * (b - a)
+        ends = [np.column_stack([np.full(9, x), other])[:, ::1 if axis == 0 else -1] for x in (lo, hi)]
+        gap = np.linalg.norm(patch.evaluate(*ends[0].T) - patch.evaluate(*ends[1].T), axis=1)
+        if gap.max() <= tol:
+            seams.append((axis, lo, hi))
+    return seams
+
+
+def _project_onto(pieces, patch, tol):
+    """Replace the 3-D curves (NurbsCurve) among `pieces` by Pieces following their closest points on the
+    patch. On a seam the closest point is ambiguous (lo or hi): each piece keeps the side its own
+    off-seam samples lie on at either end, and a piece running along the seam takes the side of its
+    neighbours' ends, so the loop stays connected in (u, v)."""
+    from rgm.geometry import NurbsCurve
+
+    if not any(isinstance(c, NurbsCurve) for c in pieces):
+        return
+    seams = _seams(patch, tol)
+    probe = np.linspace(0.0, 1.0, 33)
+    sides = {}
+    for k, c in enumerate(pieces):
+        if not isinstance(c, NurbsCurve):
+            continue
+        uv = patch.closest(c.evaluate(c.domain[0] + probe * (c.domain[1] - c.domain[0])))[0]
+        for axis, lo, hi in seams:
+            off = np.flatnonzero(np.minimum(np.abs(uv[:, axis] - lo), np.abs(uv[:, axis] - hi)) > 1e-7 * (hi - lo))
+            side = lambda i: lo if uv[i, axis] < 0.5 * (lo + hi) else hi   # noqa: E731
+            sides[k, axis] = (side(off[0]), side(off[-1])) if len(off) else None
+    for k, c in enumerate(pieces):   # pieces along a seam: the side where the neighbouring pieces end
+        for axis, lo, hi in seams:
+            if (k, axis) in sides and sides[k, axis] is None:
+                near = [sides.get(((k - 1) % len(pieces), axis)), sides.get(((k + 1) % len(pieces), axis))]
+                value = near[0][1] if near[0] else near[1][0] if near[1] else lo
+                sides[k, axis] = (value, value)
+    for k, c in enumerate(pieces):
+        if isinstance(c, NurbsCurve):
+            pieces[k] = Piece(patch, _seam_aware(patch, c, [(a, lo, hi, sides[k, a]) for a, lo, hi in seams]))
+
+
+def _seam_aware(patch, curve, seams):
+    """uv(s) of the closest points of `curve` (s in [0, 1] over its domain), seam points put on the side
+    chosen for the piece's start (s < 1/2) or end."""
+    t0, t1 = curve.domain
+
+    def uv(s):
+        s = np.asarray(s, float)
+        out = patch.closest(curve.evaluate(t0 + s * (t1 - t0)))[0]
+        for axis, lo, hi, (start, end) in seams:
+            on = np.minimum(np.abs(out[:, axis] - lo), np.abs(out[:, axis] - hi)) <= 1e-7 * (hi - lo)
+            out[on, axis] = np.where(s[on] < 0.5, start, end)
+        return out
+
+    return uv
 
 
 def _rectangle(patch) -> list:

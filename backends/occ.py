@@ -155,9 +155,10 @@ def _edges_of(curve):
         pts = curve.points if isinstance(curve, Polyline) else np.asarray(curve.curve.ctrl)
         return [BRepBuilderAPI_MakeEdge(_pnt(a), _pnt(b)).Edge() for a, b in zip(pts[:-1], pts[1:])
                 if np.linalg.norm(b - a) > PRECISION]
-    if isinstance(curve, Circle):
-        helper = np.eye(3)[int(np.argmin(np.abs(curve.normal)))]
-        circ = gp_Circ(gp_Ax2(_pnt(curve.center), _dir(curve.normal), _dir(np.cross(curve.normal, helper))),
+    if isinstance(curve, Circle):   # starting where rgm's circle starts, so loops stay joined
+        from rgm.geometry.conics import perpendicular
+
+        circ = gp_Circ(gp_Ax2(_pnt(curve.center), _dir(curve.normal), _dir(perpendicular(curve.normal))),
                        curve.radius)
         return [BRepBuilderAPI_MakeEdge(circ).Edge()]
     if isinstance(curve, CircularArc):

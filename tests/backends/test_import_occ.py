@@ -53,16 +53,10 @@ def _pcurve_gap(shape, count: int = 9) -> float:
     return gap
 
 
-#: backends/occ.py (outside the IGES back end) builds a trimmed face's pcurves of 3-D loop edges by
-#: projecting them onto the surface's NURBS form; on the imported cylinder (a revolution of 2 pi to 10
-#: digits, edges meeting at its seam) the projected pcurves do not join, and `-t step` fails
-STEP_SEAM = pytest.mark.xfail(strict=True, reason="occ.py: pcurves projected across a closed revolution's seam "
-                                                  "do not join end to start")
 CASES = [(n, t) for n in ("box", "cylinder", "fillet", "loft") for t in ("iges", "step")]
 
 
-@pytest.mark.parametrize("name, target", [pytest.param(n, t, marks=STEP_SEAM) if (n, t) == ("cylinder", "step")
-                                          else (n, t) for n, t in CASES])
+@pytest.mark.parametrize("name, target", CASES)
 def test_import_compile_and_read_back_gives_the_original_geometry(tmp_path, capsys, name, target):
     from rgm.backends.iges_occ_check import occ_read_iges, occ_write_iges, shape_points
     from rgm.backends.iges_read import read_iges_file

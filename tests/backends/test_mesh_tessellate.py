@@ -218,3 +218,24 @@ def test_bad_requests_are_clear_errors(tmp_path):
     with pytest.raises(BackendError, match="format"):
         write_mesh(pin_model(), tmp_path / "x.abc", fmt="abc", tol=0.1)
     assert not (tmp_path / "x.abc").exists()
+
+
+def test_trim_loop_of_3d_curves_across_a_seam():
+    """A full cylinder trimmed by 3-D curves as IGES files give it (top circle, the seam line down, bottom
+    circle, the seam line up): the seam pieces land on opposite sides of the domain, so the face is the
+    whole tube, stitched along its seam, with its exact area up to the chordal bound."""
+    from rgm.model import Line
+
+    seam_top, seam_bottom = [5.0, 0.0, 10.0], [5.0, 0.0, -10.0]
+    tube = Revolution(Line(seam_bottom, seam_top), [0, 0, 0], [0, 0, 1])
+    loop = Loop((Circle([0, 0, 10], [0, 0, -1], 5.0), Line(seam_top, seam_bottom), Circle([0, 0, -10], [0, 0, 1], 5.0),
+                 Line(seam_bottom, seam_top)))
+    tol = 0.01
+    v, t = tessellate(TrimmedFace(tube, loop), tol)
+    counts, consistent = edge_counts(t, len(v))
+    assert consistent and set(counts) == {1, 2}
+    he = np.sort(t[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    keys, n = np.unique(he[:, 0] * len(v) + he[:, 1], return_counts=True)
+    rim = np.unique(np.stack([keys[n == 1] // len(v), keys[n == 1] % len(v)]))
+    assert np.abs(np.abs(v[rim, 2]) - 10).max() < 1e-9           # open only along the two circles
+    assert area(v, t) == pytest.approx(2 * np.pi * 5 * 20, abs=tol * 2 * (2 * np.pi * 5))
