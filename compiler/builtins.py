@@ -2,8 +2,10 @@
 
 A builtin has one or more overloads (`line` of two point3 is a curve3, of two point2 a curve2); the
 overloads of one builtin share their parameter names and order, so arguments are bound to parameters
-once and then each overload is tried in turn. Transforms are generic: `translate(g: G, by: vec) -> G`
-returns the type of its first argument. The table is also what a diagnostic's `= note:` line prints.
+once and then each overload is tried in turn. Transforms applied to geometry are generic:
+`translate(g: G, by: vec) -> G` and `place(g: G, t: transform) -> G` return the type of their first
+argument. Transform values (`translation`, `rotation`, `scaling`, `mirroring`, `frame`, `inverse`) are
+of type `transform` and compose with `*`. The table is also what a diagnostic's `= note:` line prints.
 """
 from __future__ import annotations
 
@@ -11,7 +13,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 from .types import (ANGLE, CURVE2, CURVE3, FACE, GEOMETRY, HPOINT, INT, KNOTS, LENGTH, LOOP, NET, NUM,
-                    PLANE, POINT2, POINT3, SHELL, STR, SURFACE, VEC, Type, list_of, union, var)
+                    PLANE, POINT2, POINT3, SHELL, STR, SURFACE, TRANSFORM, VEC, Type, list_of, union, var)
 
 
 @dataclass(frozen=True)
@@ -145,6 +147,14 @@ FUNCTIONS: dict[str, Builtin] = {b.name: b for b in (
     _f("rotate", ((_p("g", G), _p("axis", VEC), _p("angle", ANGLE), _p("about", POINT3, _ORIGIN)), G)),
     _f("scale", ((_p("g", G), _p("factor", NUM), _p("about", POINT3, _ORIGIN)), G)),
     _f("mirror", ((_p("g", G), _p("plane", PLANE)), G)),
+    # transform values: `t2 * t1` applies t1 first; `place` applies one to any geometry G
+    _f("translation", ((_p("by", VEC),), TRANSFORM)),
+    _f("rotation", ((_p("axis", VEC), _p("angle", ANGLE), _p("about", POINT3, _ORIGIN)), TRANSFORM)),
+    _f("scaling", ((_p("factor", NUM), _p("about", POINT3, _ORIGIN)), TRANSFORM)),
+    _f("mirroring", ((_p("plane", PLANE),), TRANSFORM)),
+    _f("frame", ((_p("origin", POINT3), _p("z", VEC), _p("x", VEC)), TRANSFORM)),
+    _f("inverse", ((_p("t", TRANSFORM),), TRANSFORM)),
+    _f("place", ((_p("g", G), _p("t", TRANSFORM)), G)),
 )}
 
 

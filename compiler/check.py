@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 from . import ast as A
 from . import types as T
 from .builtins import ANNOTATIONS, FRACTIONS, FUNCTIONS, Param, Signature
-from .diagnostics import Diagnostic, error, sort_and_dedupe, warning
+from .diagnostics import Diagnostic, Span, error, sort_and_dedupe, warning
+from .format import format_expr
 from .resolve import Resolution, resolve
 from .suggest import did_you_mean, suggest
 from .units import to_model
@@ -56,6 +57,8 @@ _NO_ENV: dict = {}      # the (never written) environment outside fns
 DEEP_LIMIT = 100_000
 ARITHMETIC = ("arithmetic: point - point = vec, point ± vec = point, vec ± vec, number × vec, vec / number, "
               "length × number = length, length / length = number, angle ± angle")
+COMPOSITION = "transform × transform = transform: `t2 * t1` applies t1 first"
+_MAKE_TRANSFORM = "make one with `translation`, `rotation`, `scaling`, `mirroring` or `frame`"
 _VERBS = {"+": "add {l} and {r}", "-": "subtract {r} from {l}", "*": "multiply {l} by {r}", "/": "divide {l} by {r}"}
 
 
@@ -73,6 +76,12 @@ def _why(fname: str, pname: str, pos: int | None, annotation: bool = False) -> s
     if pos is not None:
         return f"the {ordinal(pos + 1)} argument of {callee} (`{pname}`)"
     return f"`{pname}` of {callee}"
+
+
+def _quote(expr, limit: int = 80) -> str | None:
+    """The canonical text of `expr` for a hint; None when it is too long to quote on one line."""
+    text = format_expr(expr)
+    return text if len(text) <= limit and "\n" not in text else None
 
 
 def _hint(expected: T.Type, actual: T.Type, expr, units: str) -> str | None:
@@ -94,6 +103,11 @@ def _hint(expected: T.Type, actual: T.Type, expr, units: str) -> str | None:
         return "this curve lies in a surface's parameter space (it is built from `uv` points)"
     if expected == T.VEC and actual == T.POINT3:
         return "a direction is `vec(x, y, z)`; the difference `b - a` of two points is a vec"
+    if expected == T.TRANSFORM:
+        text = _quote(expr) if actual == T.VEC else None
+        return f"a vec is a displacement: did you mean `translation({text})`?" if text else _MAKE_TRANSFORM
+    if actual == T.TRANSFORM:
+        return "a transform is not geometry: `place(g, t)` moves the geometry g by it"
     return None
 
 
@@ -160,8 +174,9 @@ class _Checker:
             if name.id in self.res.bindings:
                 t = self.binding_type(name.id)
                 if not T.accepts(T.EXPORTABLE, t):
+                    hint = "export what it moves: `placed := place(g, t);`" if t == T.TRANSFORM else None
                     self.diags.append(error("E0310", f"cannot export `{name.id}`: it is {T.describe(t)}, not geometry",
-                                            name.span, f"{T.describe(t)}", [f"exportable: {T.EXPORTABLE}"]))
+                                            name.span, f"{T.describe(t)}", [f"exportable: {T.EXPORTABLE}"], hint))
 
     def annotations(self, annotations) -> None:
         for ann in annotations:
@@ -238,9 +253,11 @@ class _Checker:
                 hint = "there is no area type; scale a length by a plain number"
             elif left == right == T.POINT3 and expr.op == "+":
                 hint = "move a point by a vec: `a + (b - a) / 2` is the midpoint"
+            elif T.TRANSFORM in (left, right):
+                hint = "`place(g, t)` moves geometry g by a transform t; transforms compose with `*`"
             verb = _VERBS[expr.op].format(l=T.describe(left), r=T.describe(right))
-            self.diags.append(error("E0306", f"cannot {verb}", expr.span, f"{left} {expr.op} {right}", [ARITHMETIC],
-                                    hint))
+            notes = [ARITHMETIC, COMPOSITION] if T.TRANSFORM in (left, right) else [ARITHMETIC]
+            self.diags.append(error("E0306", f"cannot {verb}", expr.span, f"{left} {expr.op} {right}", notes, hint))
             return T.ANY
         if expr.op == "/":
             self.values.division(expr, env)
@@ -275,10 +292,13 @@ class _Checker:
             if user:
                 sig = self.fn_signature(name)
                 bound = self.bind(name, sig, args, kwargs, call.span, (str(sig),))
-                for pname, bargs in bound.items():
-                    self.mismatch(name, pname, sig.param(pname).type, bargs[0], (str(sig),))
+                bad = [(p, a[0]) for p, a in ((sig.param(k), v) for k, v in bound.items())
+                       if not T.accepts(p.type, a[0].type)]
+                if not self.swapped(name, bad, (str(sig),), call):
+                    for param, arg in bad:
+                        self.mismatch(name, param.name, param.type, arg, (str(sig),))
                 return self.fn_result(name)
-            known = self.overload(name, builtin, args, kwargs, call.span)
+            known = self.overload(name, builtin, args, kwargs, call)
             if known[1] is not None:
                 self.calls[key] = known
         result, slots = known
@@ -288,13 +308,13 @@ class _Checker:
             result = self.values.check(name, call, {p: exprs[i] for p, i in slots}, local) or result
         return result
 
-    def overload(self, name: str, builtin, args, kwargs, span) -> tuple[T.Type, tuple | None]:
+    def overload(self, name: str, builtin, args, kwargs, call: A.Call) -> tuple[T.Type, tuple | None]:
         """Bind a builtin call, choose its overload and report what does not fit. Returns the result
         type and, when nothing was reported, the parameters given exactly one argument as (name,
         index into the positional then named arguments) pairs; None otherwise."""
         notes = builtin.notes
         clean = len(self.diags)
-        bound = self.bind(name, builtin.overloads[0], args, kwargs, span, notes)
+        bound = self.bind(name, builtin.overloads[0], args, kwargs, call.span, notes)
         chosen, best, best_bad = None, None, None
         for sig in builtin.overloads:
             bad = [(p, a) for p in sig.params for a in bound.get(p.name, ()) if not T.accepts(p.type, a.type)]
@@ -304,6 +324,8 @@ class _Checker:
             if best_bad is None or len(bad) < len(best_bad):
                 best, best_bad = sig, bad
         if chosen is None:
+            if self.swapped(name, best_bad, notes, call):
+                return T.ANY, None
             for param, arg in best_bad:
                 others = [] if param.variadic else [   # what the other overloads would take here
                     s.param(param.name).type for s in builtin.overloads
@@ -323,7 +345,7 @@ class _Checker:
             return sig.result
         param = next(p for p in sig.params if p.type == sig.result)
         args = bound.get(param.name)
-        return args[0].type if args else T.ANY
+        return args[0].type if args and T.accepts(param.type, args[0].type) else T.ANY   # no cascade
 
     def bind(self, fname: str, sig: Signature, args, kwargs, span, notes, annotation=False) -> dict[str, list[Arg]]:
         """Match positional and named arguments to parameters, reporting arity (E0302), unknown (E0304),
@@ -363,6 +385,26 @@ class _Checker:
                 self.diags.append(error("E0303", f"{_callee(fname, annotation)} needs at least one of "
                                         f"`{param.name}` ({param.type})", span, "nothing given", notes))
         return bound
+
+    def swapped(self, fname: str, bad: list, notes, call: A.Call) -> bool:
+        """Two positional arguments that each miss their own parameter but fit each other's
+        (`place(t, ring)`): reported once as arguments in the wrong order (E0312), not as two E0301."""
+        if len(bad) != 2:
+            return False
+        (p1, a1), (p2, a2) = sorted(bad, key=lambda b: -1 if b[1].pos is None else b[1].pos)
+        if (a1.pos is None or p1 is p2 or not T.accepts(p1.type, a2.type) or not T.accepts(p2.type, a1.type)):
+            return False
+        s1, s2 = a1.expr.span, a2.expr.span
+        span = s1 and s2 and Span(s1.file, s1.line, s1.col, s2.end_line, s2.end_col, s1.start_pos, s2.end_pos)
+        args = list(call.args)
+        args[a1.pos], args[a2.pos] = a2.expr, a1.expr
+        fixed = _quote(A.Call(call.func, tuple(args), call.kwargs))
+        fix = f"swap them: `{fixed}`" if fixed else "swap them"
+        self.diags.append(error(
+            "E0312", f"the {ordinal(a1.pos + 1)} and {ordinal(a2.pos + 1)} arguments of `{fname}` are in the wrong "
+            f"order: `{p1.name}` expects {T.describe(p1.type)}, `{p2.name}` {T.describe(p2.type)}", span,
+            f"{T.describe(a1.type)}, then {T.describe(a2.type)}", notes, fix))
+        return True
 
     def mismatch(self, fname, pname, expected, arg: Arg, notes, annotation=False) -> None:
         if expected is None or T.accepts(expected, arg.type):

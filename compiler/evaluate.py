@@ -4,7 +4,9 @@ Bindings are evaluated once each, in the resolver's dependency order, with `-D` 
 the expressions of `param`s. Every number leaves here in model units (lengths, through
 `rgm.compiler.units.to_model`) or radians (angles). Builtins build model objects of the kind the
 language names (a `revolve` is a `Revolution`, not an anonymous NURBS); transforms become 4x4
-homogeneous matrices applied with `.transform`, which keeps that kind. `intersect(a, b)` builds a lazy
+homogeneous matrices (`rgm.model.transform`) applied with `.transform`, which keeps that kind, and
+transform values (`rotation(...)`, `t2 * t1`, `inverse(t)`) are `Transform` objects with the span of
+the expression that built them; `place(g, t)` applies one. `intersect(a, b)` builds a lazy
 `IntersectionCurve`: nothing is marched here. User `fn`s are expanded at each call with their
 arguments bound in a local scope.
 
@@ -13,7 +15,6 @@ not fit its control points, division by zero) become diagnostics E0510/E0511 on 
 """
 from __future__ import annotations
 
-import math
 from collections import ChainMap
 from functools import lru_cache
 
@@ -26,9 +27,13 @@ from rgm.compiler.units import to_model
 from rgm.compiler.values import clamped_knots, uniform_knots
 from rgm.errors import GeometryError
 from rgm import model as M
+from rgm.model.transform import frame, mirroring, rotation, scaling, translation
 
 #: the model tolerance when a file has no `tolerance` statement (model units)
 DEFAULT_TOLERANCE = 0.01
+#: builtins that move geometry (`translate(g, ...) -> G`, `place(g, t) -> G`): the moved copy is
+#: anonymous and points at the call that moved it
+_MOVES = frozenset(n for n, b in FUNCTIONS.items() if b.overloads[0].result.kind == "var")
 
 
 class _Failure(Exception):
@@ -48,46 +53,6 @@ def _default_expr(text: str) -> A.Expr:
     if program is None or diagnostics:
         raise RuntimeError(f"unparsable builtin default {text!r}")
     return program.statements[0].expr
-
-
-# --- transforms as 4x4 matrices ------------------------------------------------------------------
-
-def translation(by) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, 3] = by
-    return m
-
-
-def rotation(axis, angle: float, about) -> np.ndarray:
-    """Right-handed rotation by `angle` (radians) about the line through `about` along `axis` (Rodrigues)."""
-    k = np.asarray(axis, float)
-    norm = np.linalg.norm(k)
-    if norm == 0:
-        raise GeometryError("rotation axis has zero length")
-    k = k / norm
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    r = np.eye(3) + math.sin(angle) * kx + (1 - math.cos(angle)) * kx @ kx
-    return _about(r, about)
-
-
-def scaling(factor: float, about) -> np.ndarray:
-    if factor == 0:
-        raise GeometryError("scale factor is zero")
-    return _about(np.eye(3) * factor, about)
-
-
-def mirroring(plane: M.Plane) -> np.ndarray:
-    """Reflection in a plane (Householder): x -> x - 2 ((x - o) . n) n."""
-    n = plane.normal
-    return _about(np.eye(3) - 2 * np.outer(n, n), plane.origin)
-
-
-def _about(linear: np.ndarray, center) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, :3] = linear
-    c = np.asarray(center, float)
-    m[:3, 3] = c - linear @ c
-    return m
 
 
 # --- builtins ------------------------------------------------------------------------------------
@@ -158,6 +123,13 @@ def _revolve(a, span):
     return M.Revolution(a["profile"], point, direction, a["from"], a["to"], span=span)
 
 
+def _scaling(a, span):
+    """`scaling(factor, about)`: a transform value scales by a positive factor (a reflection is `mirroring`)."""
+    if not a["factor"] > 0:
+        raise GeometryError(f"a scaling factor must be positive, found {a['factor']:g}")
+    return M.Transform(scaling(a["factor"], _xyz(a["about"])), span=span)
+
+
 def _knots(values) -> np.ndarray:
     return np.asarray(values, float)
 
@@ -192,6 +164,13 @@ def _make_builtins(tolerance: float) -> dict:
         "rotate": lambda a, s: a["g"].transform(rotation(_xyz(a["axis"]), a["angle"], _xyz(a["about"]))),
         "scale": lambda a, s: a["g"].transform(scaling(a["factor"], _xyz(a["about"]))),
         "mirror": lambda a, s: a["g"].transform(mirroring(a["plane"])),
+        "translation": lambda a, s: M.Transform(translation(_xyz(a["by"])), span=s),
+        "rotation": lambda a, s: M.Transform(rotation(_xyz(a["axis"]), a["angle"], _xyz(a["about"])), span=s),
+        "scaling": _scaling,
+        "mirroring": lambda a, s: M.Transform(mirroring(a["plane"]), span=s),
+        "frame": lambda a, s: M.Transform(frame(_xyz(a["origin"]), _xyz(a["z"]), _xyz(a["x"])), span=s),
+        "inverse": lambda a, s: a["t"].inverse().named(None, s),
+        "place": lambda a, s: a["t"].apply(a["g"]),
     }
 
 
@@ -220,6 +199,8 @@ def _member(value, attr: str):
 
 
 def _binary(op: str, left, right):
+    if isinstance(left, M.Transform):   # the checker allows only transform * transform
+        return left.after(right)
     lp, rp = isinstance(left, M.Point), isinstance(right, M.Point)
     lv, rv = isinstance(left, M.Vector), isinstance(right, M.Vector)
     if op == "/" and not (lp or lv) and right == 0:
@@ -274,7 +255,8 @@ class Evaluator:
             return M.Vector(-value.xyz) if isinstance(value, M.Vector) else -value
         if isinstance(expr, A.BinOp):
             left, right = self.eval(expr.left, scope), self.eval(expr.right, scope)
-            return self._guard(expr, lambda: _binary(expr.op, left, right))
+            value = self._guard(expr, lambda: _binary(expr.op, left, right))
+            return value.named(None, expr.span) if isinstance(value, M.Transform) else value
         if isinstance(expr, A.Member):
             value = self.eval(expr.obj, scope)
             return self._guard(expr, lambda: _member(value, expr.attr))
@@ -301,7 +283,7 @@ class Evaluator:
             return self.eval(fn.body, ChainMap(local, self.env))
         bound = self._bind(FUNCTIONS[name], args, kwargs)
         value = self._guard(expr, lambda: self.builtins[name](bound, expr.span))
-        if isinstance(value, M.ModelObject) and name in ("translate", "rotate", "scale", "mirror"):
+        if name in _MOVES and isinstance(value, M.ModelObject):
             value = value.named(None, expr.span)
         return value
 

@@ -10,7 +10,8 @@ Rules (docs/architecture.md, "The language"):
   where a `num` is; an `angle` needs `deg` or `rad`;
 - `plane` is usable wherever a `surface` is;
 - arithmetic: point - point = vec, point +/- vec = point, vec +/- vec, scalar * vec, vec / num,
-  length * num = length, length / length = num, angle +/- angle (see `binary`).
+  length * num = length, length / length = num, angle +/- angle, and transform * transform =
+  transform, the composition `t2 * t1` that applies t1 first (see `binary`).
 """
 from __future__ import annotations
 
@@ -186,6 +187,8 @@ def binary(op: str, left: Type, right: Type) -> Type | None:
     if op == "*":
         if left in scalar and right == VEC or left == VEC and right in scalar:
             return VEC
+        if left == right == TRANSFORM:
+            return TRANSFORM
         return None
     if op == "/" and left == VEC and right in _SCALAR_NUM:
         return VEC

@@ -5,7 +5,8 @@ constant (geometry, fn parameters) is skipped. Rules (Piegl & Tiller, *The NURBS
 degree >= 1; knot vectors non-decreasing with len = n + degree + 1 and no interior knot repeated more
 than `degree` times; weights > 0 and one per control point; control nets rectangular, entries of the
 right width, and as many rows/columns as the knot vectors need; plus geometric sanity that needs no
-evaluation (positive radius, non-zero directions, a revolution of at most one turn).
+evaluation (positive radius, non-zero directions, a revolution of at most one turn, a positive
+`scaling` factor, `frame` axes that are not parallel).
 Intrinsic problems of a knot vector are reported where it is built (`knots([...])`, `clamped(...)`),
 problems relative to a spline (count, multiplicity for its degree) where it is used.
 """
@@ -283,6 +284,29 @@ class ValueChecker:
             self.report(error("E0418", "a scale factor of 0 collapses the geometry to a point", args["factor"].span,
                               "zero"))
 
+    _rotation = _rotate
+
+    def _scaling(self, args):
+        f = self.fold(args.get("factor"))
+        if isinstance(f, float) and not f > 0:
+            self.report(error("E0421", f"a scaling factor must be positive, found {f:g}", args["factor"].span,
+                              "not positive",
+                              hint="a reflection is `mirroring(plane)`" if f < 0 else None))
+
+    def _frame(self, args):
+        self._nonzero(args, "z", "the frame's z axis")
+        self._nonzero(args, "x", "the frame's x axis")
+        z, x = self.fold(args.get("z")), self.fold(args.get("x"))
+        if not (isinstance(z, Point) and isinstance(x, Point) and any(z.coords) and any(x.coords)):
+            return
+        (a, b, c), (d, e, f) = z.coords, x.coords
+        cross = math.hypot(b * f - c * e, c * d - a * f, a * e - b * d)
+        if cross <= PARALLEL_SINE * math.hypot(a, b, c) * math.hypot(d, e, f):
+            self.report(error("E0422", "the frame's x axis is parallel to its z axis", args["x"].span,
+                              "along z", ["x is made perpendicular to z (its part along z is removed), so it only "
+                                          "needs to be not parallel to z"],
+                              "give x any direction across z, for example `vec(1, 0, 0)` for z = `vec(0, 0, 1)`"))
+
     def _line(self, args):
         a, b = self.fold(args.get("a")), self.fold(args.get("b"))
         if isinstance(a, Point) and a == b:
@@ -300,6 +324,10 @@ class ValueChecker:
             self.report(error("E0419", f"the revolution sweeps {math.degrees(abs(end - start)):g}deg, "
                               "more than a full turn", where.span, "over 360deg"))
 
+
+#: `frame` axes count as parallel below this sine of their angle (rgm.model.transform.PARALLEL_SINE,
+#: which needs numpy and so cannot be imported here)
+PARALLEL_SINE = 1e-9
 
 #: builtin name -> its check (the method `_name` above), looked up once
 RULES = {name: getattr(ValueChecker, "_" + name) for name in FUNCTIONS if hasattr(ValueChecker, "_" + name)}

@@ -8,9 +8,10 @@ from rgm.model.objects import (
     Loop, Model, Plane, Point, Polyline, Revolution, RuledSurface, Shell, Surface, TrimmedFace, Vector,
     frozen_array,
 )
+from rgm.model.transform import Transform
 
 __all__ = [
     "GEOMETRY", "BSplineCurve", "BSplineSurface", "Circle", "CircularArc", "CompositeCurve", "Curve", "Extrusion",
     "HPoint", "IntersectionCurve", "Line", "Loop", "Model", "ModelObject", "Plane", "Point", "Polyline", "Revolution",
-    "RuledSurface", "Shell", "Surface", "TrimmedFace", "Vector", "frozen_array",
+    "RuledSurface", "Shell", "Surface", "Transform", "TrimmedFace", "Vector", "frozen_array",
 ]

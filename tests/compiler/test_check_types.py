@@ -129,3 +129,32 @@ def test_suggestions():
     assert did_you_mean("profiel", ["profile", "pin", "axis"]) == "did you mean `profile`?"
     assert suggest("xyz", ["profile", "revolve"]) == []
     assert suggest("Radius", ["radius"]) == ["radius"]
+
+
+def test_transforms_compose_and_place_keeps_the_geometry_type():
+    from rgm.compiler.check import check
+    from rgm.compiler.parser import parse
+
+    assert T.binary("*", T.TRANSFORM, T.TRANSFORM) is T.TRANSFORM
+    assert T.binary("*", T.TRANSFORM, T.CURVE3) is None and T.binary("+", T.TRANSFORM, T.TRANSFORM) is None
+    program, _ = parse("t := rotation(vec(0, 0, 1), 90deg) * inverse(frame(pt(0, 0, 0), vec(0, 0, 1), vec(1, 0, 0)));\n"
+                       "c := place(circle(pt(1, 0, 0), 1), t);\n"
+                       "f := place(trim(plane(pt(0, 0, 0), vec(0, 0, 1)), loop(uvline(uv(0, 0), uv(1, 0)))), t);\n"
+                       "export c, f;\n", "t.rgm")
+    result = check(program)
+    assert result.ok and (result.types["t"], result.types["c"], result.types["f"]) == (T.TRANSFORM, T.CURVE3, T.FACE)
+
+
+def test_swapped_arguments_are_one_diagnostic_for_builtins_and_fns():
+    from rgm.compiler.check import check
+    from rgm.compiler.parser import parse
+
+    program, _ = parse("fn ring(at: point3, r: length) := circle(at, r);\n"
+                       "a := ring(5mm, pt(0, 0, 0));\nb := circle(5mm, pt(0, 0, 0));\n"
+                       "c := place(translation(vec(1, 0, 0)), a);\nd := place(5, translation(vec(1, 0, 0)));\n"
+                       "export a, b, c, d;\n", "s.rgm")
+    errors = [d for d in check(program).diagnostics if d.is_error]
+    assert [(d.code, d.span.line, d.span.col) for d in errors] == [
+        ("E0312", 2, 11), ("E0312", 3, 13), ("E0312", 4, 12), ("E0301", 5, 12)]   # no cascade into `export`
+    assert errors[0].hint == "swap them: `ring(pt(0, 0, 0), 5mm)`"
+    assert errors[2].hint == "swap them: `place(a, translation(vec(1, 0, 0)))`"

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from rgm.compiler.evaluate import mirroring, rotation, scaling, translation
+from rgm.model.transform import mirroring, rotation, scaling, translation
 from rgm.geometry import NurbsSurface
 from rgm.model import (BSplineSurface, Circle, CircularArc, CompositeCurve, Extrusion, Line, Model, Plane, Point,
                        Polyline, Revolution, RuledSurface)
