@@ -15,6 +15,7 @@ Mapping (docs/backends.md has the full table and the options):
 | Revolution                    | 120 = profile + axis 110 (under a trim: 128, see below)         |
 | TrimmedFace                   | 144 with one 142 per loop (parameter-space and model-space curve)|
 | Shell                         | 402 form 7 group of its faces                                   |
+| closed Shell / Revolution     | with trim_entity=186: 186 manifold solid B-rep (`iges_brep`)     |
 | binding names                 | 406 form 15 name property + the 8-character DE label            |
 
 Rules followed (research notes §2.6): children are written before parents, everything a root
@@ -23,6 +24,9 @@ never referred to (an exported object that another export also uses is written t
 root, once as a child), 126/128 always carry complete clamped knot vectors, weights and the
 parameter range. A trimmed revolution is written as the 128 of its exact NURBS form, because rgm's
 trimming curves live in that surface's (u, v) while a 120's (u, v) is (profile parameter, angle).
+The two curves of a 142 share a parameter (a model-space arc in a loop is its 126 form 2; a fitted
+partner has the parameter of the exact curve's entity). Transforms are baked: the model holds moved
+objects of their own kinds, so 124 only places arcs (docs/backends.md says why).
 """
 from __future__ import annotations
 

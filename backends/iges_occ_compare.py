@@ -15,7 +15,8 @@ the model's exports) and, per exported object:
 - cover: the other direction, points of rgm's curves and trimming curves against OCC's edges
   (`Extrema_ExtPC` on surface ∘ pcurve), so a missing or wrong trim fails.
 
-Distances are in model units (OpenCASCADE reads IGES in mm). OCP is imported inside functions.
+Distances are in model units (OpenCASCADE reads IGES in mm). OCP is imported inside functions (like
+`iges_occ_check`, this module belongs with `rgm.backends.occ` by the architecture rule).
 """
 from __future__ import annotations
 
