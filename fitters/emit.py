@@ -1,7 +1,10 @@
 """Writing the recovered parts as formatted, type-correct `.rgm` text.
 
 Each part is built in its own part-aligned frame from named dimensions (`param radius := 27.1500mm;`),
-so a designer changes one number, and placed by one rotation (axis and angle) and one translation.
+so a designer changes one number, and placed by one rotation (axis and angle) and one translation, each
+left out when it is the identity; `snapped_placement` makes an axis or offset that the data cannot tell
+from a world axis or from 0 exactly that (the pipeline re-measures the certificate and keeps it only if
+it still holds).
 The exported binding carries `@source` (scans and their sha256), `@classified` (category, confidence,
 runner-up and the superellipsoid's numbers) and `@fit` (the certificate) annotations.
 
@@ -11,9 +14,10 @@ certificate is measured on exactly the model the file describes.
 Revolutions (the paper's pin, Figure 7): profile in the part's x-y plane (x = radius, y = along the axis
 from 0 to `length`), revolved about the y axis.  Named dimensions: `radius` (the longest axis-parallel
 line), `length` (the profile's extent along the axis), `chamfer` (45-degree lines joining the radius
-to an end face, when all are equal), `fillet` (quarter-circle arcs tangent to an axis-parallel and a
-radial face; `fillet1`, ... when they differ) and, per rectangular groove k, `groovek_at`, `groovek_width`
-and `groovek_depth`; other coordinates are written as numbers.  Arcs are `arc(start, through, end)`;
+to an end face, when all agree within their measured uncertainty; `chamfer1`, ... when not), `fillet`
+(quarter-circle arcs tangent to an axis-parallel and a radial face; `fillet1`, ... when they differ)
+and, per rectangular groove k, `groovek_at`, `groovek_width` and `groovek_depth`; other coordinates are
+written as numbers.  A coordinate takes the nearest named expression within the snap distance.  Arcs are `arc(start, through, end)`;
 free-form stretches are `bspline(degree: 3, knots: knots([...]), points: [...])` pieces of the `profile`,
 their end control points the chain's vertices.
 Boxes: a rectangle `base` in the part's x-y plane extruded along z by `height`, with trimmed planes as
@@ -23,15 +27,15 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from rgm.fitters.primitives import BoxFit
 from rgm.fitters.profile2d import Profile, Segment
-from rgm.fitters.revolution import RevolutionFit
+from rgm.fitters.revolution import RevolutionFit, axis_frame
 
-__all__ = ["EmittedPart", "emit_part", "write_rgm", "format_length"]
+__all__ = ["EmittedPart", "emit_part", "snapped_placement", "write_rgm", "format_length"]
 
 _DEC = 4  # decimals of lengths (model units): 0.1 micrometre in mm
 
@@ -71,14 +75,16 @@ class _Dims:
         return value
 
     def expr(self, x: float, candidates) -> tuple[str, float]:
+        """The candidate (text, value) nearest to x if within snap (the first of equally near ones), else
+        x written as a number."""
         x = round(float(x), _DEC)
-        for text, value in candidates:
-            if abs(x - value) <= self.snap:
-                return text, value
+        best = min(candidates, key=lambda c: abs(x - c[1]), default=None)
+        if best is not None and abs(x - best[1]) <= self.snap:
+            return best
         return _num(x), x
 
 
-def _revolution_dims(profile: Profile, suffix: str, snap: float):
+def _revolution_dims(profile: Profile, suffix: str, snap: float, sigma: float):
     segs, verts = profile.segments, profile.vertices
     dims = _Dims(snap)
     vertical = [s for s in segs if s.kind == "line" and abs(s.p1[0] - s.p0[0]) < 1e-9]
@@ -92,12 +98,12 @@ def _revolution_dims(profile: Profile, suffix: str, snap: float):
     main = max(vertical, key=lambda s: abs(s.p1[1] - s.p0[1]))
     radius = dims.add("radius" + suffix, main.p0[0])
     length = dims.add("length" + suffix, np.ptp(verts[:, 1]))
-    chamfers = []
-    for s in segs:
+    chamfers = []   # (size, standard uncertainty) in mm
+    for k, s in enumerate(segs):
         dr, dz = abs(s.p1[0] - s.p0[0]), abs(s.p1[1] - s.p0[1])
         touches = any(np.allclose(p, q) for p in (s.p0, s.p1) for q in (main.p0, main.p1))
         if s.kind == "line" and touches and dr > 0 and abs(dr - dz) < 0.02 * max(dr, dz):
-            chamfers.append((dr + dz) / 2)
+            chamfers.append(((dr + dz) / 2, _chamfer_sigma(segs, k, sigma)))
     r_cands, z_cands = [(f"radius{suffix}", radius)], [("0", 0.0), (f"length{suffix}", length)]
     for k, (before, bottom, after) in enumerate(_grooves(segs, radius, dims.snap), 1):
         g = f"groove{k}{suffix}"
@@ -106,12 +112,37 @@ def _revolution_dims(profile: Profile, suffix: str, snap: float):
         depth = dims.add(f"{g}_depth", radius - bottom.p0[0])
         r_cands.append((f"radius{suffix} - {g}_depth", round(radius - depth, _DEC)))
         z_cands += [(f"{g}_at", at), (f"{g}_at + {g}_width", round(at + width, _DEC))]
-    if chamfers and np.ptp(chamfers) <= dims.snap:
-        c = dims.add("chamfer" + suffix, np.mean(chamfers))
-        r_cands.append((f"radius{suffix} - chamfer{suffix}", round(radius - c, _DEC)))
-        z_cands += [(f"chamfer{suffix}", c), (f"length{suffix} - chamfer{suffix}", round(length - c, _DEC))]
+    for name, value in _chamfer_params(chamfers, suffix):
+        c = dims.add(name, value)
+        r_cands.append((f"radius{suffix} - {name}", round(radius - c, _DEC)))
+        z_cands += [(name, c), (f"length{suffix} - {name}", round(length - c, _DEC))]
     _fillet_dims(segs, dims, suffix, r_cands, z_cands)
     return dims, r_cands, z_cands
+
+
+def _chamfer_sigma(segs, k, sigma):
+    """Standard uncertainty (mm) of the size of the chamfer segs[k] between its two neighbours, from the
+    profile's noise sigma (mm) and the points each line was fitted to: the size is the radius minus the
+    chamfer line's offset along the axis, where the end face meets it, so its variance is the sum of the
+    three lines' offset variances, sigma^2 / n each and twice that for the 45 deg line (an offset along
+    its normal moves its legs by sqrt 2 times as much)."""
+    nbs = [segs[j].support for j in (k - 1, k + 1) if 0 <= j < len(segs)]
+    return float(sigma * np.sqrt(2.0 / max(segs[k].support, 1) + sum(1.0 / max(n, 1) for n in nbs)))
+
+
+def _chamfer_params(chamfers, suffix):
+    """[(name, size)] of the chamfers [(size, uncertainty)] (mm) in profile order: one `chamfer` (the
+    inverse-variance weighted mean) when every two agree within three standard uncertainties of their
+    difference (or the printed resolution), else `chamfer1`, `chamfer2`, ..."""
+    if not chamfers:
+        return []
+    size, sd = np.array(chamfers, float).T
+    sd = np.where(np.isfinite(sd) & (sd > 0), sd, 0.0)
+    limit = np.maximum(3.0 * np.hypot(sd[:, None], sd[None, :]), 10.0 ** -_DEC)
+    if np.all(np.abs(size[:, None] - size[None, :]) <= limit):
+        w = 1.0 / np.maximum(sd, 10.0 ** -_DEC) ** 2
+        return [(f"chamfer{suffix}", float(np.sum(w * size) / np.sum(w)))]
+    return [(f"chamfer{k}{suffix}", float(c)) for k, c in enumerate(size, 1)]
 
 
 _K45 = 1 - np.sqrt(0.5)  # a quarter circle's midpoint sits this fraction of its radius in from the corner
@@ -169,7 +200,7 @@ def _grooves(segs, radius, snap):
 
 
 def _revolution_part(fit: RevolutionFit, name: str, suffix: str, snap: float) -> EmittedPart:
-    dims, r_c, z_c = _revolution_dims(fit.profile, suffix, snap)
+    dims, r_c, z_c = _revolution_dims(fit.profile, suffix, snap, fit.sigma)
 
     def point(p):
         (rx, rv), (zx, zv) = dims.expr(p[0], r_c), dims.expr(p[1], z_c)
@@ -207,7 +238,7 @@ def _revolution_part(fit: RevolutionFit, name: str, suffix: str, snap: float) ->
     params = [(n, v, "") for n, v in dims.named]
     frame, placed = _placement(fit.frame, body)
     return EmittedPart(name, params, bindings + [f"{name} := {placed};"], body,
-                       RevolutionFit(frame, Profile(tuple(ideal)), fit.sigma))
+                       RevolutionFit(frame, Profile(tuple(ideal)), fit.sigma, fit.axis_sigma))
 
 
 def _knot(u: float) -> str:
@@ -240,6 +271,36 @@ def _box_part(fit: BoxFit, name: str, suffix: str) -> EmittedPart:
     params = [(W, w, "along the part's x axis"), (D, d, "y"), (H, h, "z")]
     return EmittedPart(name, params, bindings + [f"{name} := {placed};"], body,
                        BoxFit(frame, np.array([w, d, h]) / 2, fit.unseen))
+
+
+def snapped_placement(shape, resolution: float):
+    """The shape (RevolutionFit or BoxFit) with its placement snapped where the data cannot tell the
+    difference, and what was snapped ({} when nothing was): a revolution's axis within three standard
+    uncertainties (`axis_sigma`, radians) of a world axis becomes that axis, turned about the middle of
+    the part (its ends move by half its length times the angle); then each component of the placement's
+    translation within `resolution` (mm; the pipeline uses tol / 10, the resolution of its dimensions)
+    of 0 becomes 0.  Snapping is a hypothesis: the caller re-measures the certificate on the result and
+    keeps it only if the certificate still holds."""
+    frame = np.array(shape.frame, float)
+    info = {}
+    if isinstance(shape, RevolutionFit) and np.isfinite(shape.axis_sigma):
+        d = frame[:3, 1]
+        k = int(np.argmax(np.abs(d)))
+        angle = float(np.arccos(min(1.0, abs(d[k]))))
+        if 0.0 < angle <= 3.0 * shape.axis_sigma:
+            target = np.sign(d[k]) * np.eye(3)[k]
+            middle = frame[:3, 3] + 0.5 * shape.length * d
+            frame = axis_frame(middle - 0.5 * shape.length * target, target)
+            info["axis"] = {"measured": d.tolist(), "to": ("-" if d[k] < 0 else "") + "xyz"[k],
+                            "angle_deg": float(np.degrees(angle)),
+                            "limit_deg": float(np.degrees(3.0 * shape.axis_sigma))}
+    t = frame[:3, 3]
+    small = (np.abs(t) <= resolution) & (t != 0.0)
+    if small.any():
+        info["offset"] = {"xyz"[i]: float(t[i]) for i in np.flatnonzero(small)}
+        info["resolution"] = float(resolution)
+        frame[:3, 3] = np.where(small, 0.0, t)
+    return (replace(shape, frame=frame) if info else shape), info
 
 
 def _placement(frame, body):

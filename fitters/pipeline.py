@@ -11,6 +11,12 @@ by projection onto base surfaces.
 
 Certificates: every filtered point counts for the emitted part nearest to it
 (`rgm.fitters.certificate.nearest_part`), exactly as `rgmc verify` re-measures.
+
+Placement: an exact part's axis within its measured uncertainty of a world axis, and offsets within the
+dimensions' resolution (tol / 10) of 0, are snapped (`rgm.fitters.emit.snapped_placement`) only if the
+certificate re-measured on the snapped model still holds; the report's `placement_snapped` says what was
+snapped (or, under `rejected`, what was not and why).  The text is the emitter's; `rgmc fit` writes it
+in canonical form once the compiler has checked it (`rgm.commands.fit`).
 """
 from __future__ import annotations
 
@@ -97,20 +103,42 @@ def _surface_samples(shape, spacing):
 
 
 def _exact(shape, name, suffix, pts, cls, tol, statistic):
-    """The emitted exact shape, or None and why when free form must model the part instead."""
+    """The emitted exact shape, or None and why when free form must model the part instead; and what of
+    its placement was snapped (`_snap`)."""
     from rgm.fitters.certificate import certify
     from rgm.fitters.emit import emit_part
 
     part = emit_part(shape, name, suffix, snap=tol / 10)
     cert = certify(part.ideal.distance(pts), tol, statistic=statistic)
+    if cert.holds:
+        part, snapped = _snap(shape, part, name, suffix, pts, tol, statistic)
+        return part, "", snapped
     centred = pts - pts.mean(axis=0)
     along = centred @ np.linalg.svd(centred[:: max(1, len(pts) // 20000)], full_matrices=False)[2].T
     extent = float((np.percentile(along, 99, axis=0) - np.percentile(along, 1, axis=0)).min())
-    if cert.holds or cert.value <= EXACT_SLACK * extent:
-        return part, ""
+    if cert.value <= EXACT_SLACK * extent:
+        return part, "", {}
     return None, (f"{name}: classified {cls.category} (confidence {cls.confidence:.2f}), but the {cls.category}'s "
                   f"{statistic} {cert.value:.4f} mm is over {EXACT_SLACK:.0%} of the part's smallest extent "
-                  f"({extent:.1f} mm): the shape does not describe the data, so it is modelled as free-form NURBS")
+                  f"({extent:.1f} mm): the shape does not describe the data, so it is modelled as free-form NURBS"), {}
+
+
+def _snap(shape, part, name, suffix, pts, tol, statistic):
+    """The emitted part with its placement snapped (`rgm.fitters.emit.snapped_placement`, offsets at the
+    dimensions' resolution tol / 10) if its certificate, re-measured on the snapped model, still holds;
+    else the part as fitted.  Returns (part, what was snapped, or why not: a JSON-ready dict)."""
+    from rgm.fitters.certificate import certify
+    from rgm.fitters.emit import emit_part, snapped_placement
+
+    snapped_shape, snapped = snapped_placement(shape, tol / 10)
+    if not snapped:
+        return part, {}
+    candidate = emit_part(snapped_shape, name, suffix, snap=tol / 10)
+    cert = certify(candidate.ideal.distance(pts), tol, statistic=statistic)
+    snapped[statistic] = cert.value
+    if cert.holds:
+        return candidate, snapped
+    return part, {"rejected": snapped, "why": f"snapped, the {statistic} would be {cert.value:.4f} mm > tol {tol:g}"}
 
 
 def _freeform_parts(points, idx, grid, name, suffix, tol, statistic):
@@ -160,15 +188,14 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
                 shape, why = _build(pts, cls, tol, seed), ""
             except GeometryError as exc:
                 shape, why = None, f"{name}: the {cls.category} builder found no shape ({exc}): modelled as free-form NURBS"
+            part, snapped = None, {}
             if shape is not None:
-                part, why = _exact(shape, name, suffix, pts, cls, tol, statistic)
-            else:
-                part = None
+                part, why, snapped = _exact(shape, name, suffix, pts, cls, tol, statistic)
         notes += [why] if why else []
         entry["modelled"] = True
         report_parts.append(entry)
         if part is not None:
-            entry.update(model="exact", params={n: v for n, v, _ in part.params})
+            entry.update(model="exact", params={n: v for n, v, _ in part.params}, placement_snapped=snapped)
             emitted.append(part)
             owners.append((cls, entry, ""))
             claimed.append(idx)

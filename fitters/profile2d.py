@@ -7,7 +7,9 @@ of pieces from axis to axis:
    conic explains is free-form data (`rgm.fitters.profile_pieces`).
 2. Free-form stretches surrounded by them drop pieces that are only the local shape of a smooth curve
    (`_absorb_into_stretches`: short beside the stretch, or left smoothly on both sides and not an
-   axis-aligned face).
+   axis-aligned face); then a stretch that one line or arc explains within noise on its own points is
+   that conic (`_conic_stretches`): where a conic and a spline both fit to the noise level, the simpler
+   model wins.
 3. Chaining: the pieces in the order the profile runs from the axis at its lowest z outwards and back
    (angle about the axis point at the median z).  Free-form data between two neighbouring pieces (at
    least `min_support` points, their median distance to the fitted spline within thr) becomes a cubic
@@ -29,8 +31,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from rgm.errors import GeometryError
-from rgm.fitters.profile_pieces import (Piece, along, extract_pieces, intersections, is_tangent, refit_tangent_arc,
-                                        tangency)
+from rgm.fitters.profile_pieces import (Piece, along, conic_over, extract_pieces, intersections, is_tangent,
+                                        refit_tangent_arc, tangency)
 from rgm.fitters.profile_spline import fit_spline_stretch, spline_closest
 
 __all__ = ["Segment", "Profile", "fit_conic_profile"]
@@ -40,7 +42,8 @@ __all__ = ["Segment", "Profile", "fit_conic_profile"]
 class Segment:
     """One piece of a profile, points (2,) in (r, z): a line from p0 to p1 (center None); a circular arc
     (center, radius) from p0 to p1 through `through`; or a cubic B-spline (ctrl (n, 2), knots (n + 4,),
-    p0 = ctrl[0], p1 = ctrl[-1])."""
+    p0 = ctrl[0], p1 = ctrl[-1]).  support: how many points the line or arc was fitted to (0 for a
+    spline, a bridging line, or a segment not fitted to data), for the uncertainty of dimensions."""
 
     p0: np.ndarray
     p1: np.ndarray
@@ -49,6 +52,7 @@ class Segment:
     through: np.ndarray | None = None
     ctrl: np.ndarray | None = None
     knots: np.ndarray | None = None
+    support: int = 0
 
     @property
     def kind(self) -> str:
@@ -180,13 +184,13 @@ def _axis_piece(z):
 
 def _segment(piece, p0, p1):
     if piece.kind == "line":
-        return Segment(p0, p1)
+        return Segment(p0, p1, support=piece.support)
     v = (p0 + p1) / 2 - piece.point
     v = v if v @ v > 1e-24 else piece.mid - piece.point
     through = piece.point + v / np.linalg.norm(v) * piece.radius
     if np.linalg.norm(through - piece.mid) > np.linalg.norm(2 * piece.point - through - piece.mid):
         through = 2 * piece.point - through                       # the arc is the side the data are on
-    return Segment(p0, p1, piece.point.copy(), float(piece.radius), through)
+    return Segment(p0, p1, piece.point.copy(), float(piece.radius), through, support=piece.support)
 
 
 def _density(count, a, b, r):
@@ -195,17 +199,17 @@ def _density(count, a, b, r):
 
 
 def _stretches(chain, q, free, z_mid, min_support):
-    """Free points (k, 2) between each pair of neighbouring pieces (by angle about (0, z_mid)), or None
-    where fewer than `min_support` lie there or their density on the surface is under a fifth of the
-    pieces' median (scattered outliers, not a stretch of surface)."""
+    """Indices into q (k,) of the free points between each pair of neighbouring pieces (by angle about
+    (0, z_mid)), or None where fewer than `min_support` lie there or their density on the surface is
+    under a fifth of the pieces' median (scattered outliers, not a stretch of surface)."""
     ang = _star(q[free], z_mid)
     typical = np.median([_density(p.support, *p.ends, np.mean(q[p.run, 0])) for p in chain])
     out = []
     for a, b in zip(chain, chain[1:]):
         lo, hi = _star(a.ends[1], z_mid), _star(b.ends[0], z_mid)
-        pts = q[free[(ang > lo) & (ang < hi)]]
-        dense = len(pts) >= min_support and _density(len(pts), a.ends[1], b.ends[0], np.mean(pts[:, 0])) > 0.2 * typical
-        out.append(pts if dense else None)
+        idx = free[(ang > lo) & (ang < hi)]
+        dense = len(idx) >= min_support and _density(len(idx), a.ends[1], b.ends[0], np.mean(q[idx, 0])) > 0.2 * typical
+        out.append(idx if dense else None)
     return out
 
 
@@ -230,11 +234,29 @@ def _absorb_into_stretches(chain, q, free, z_mid, min_support, near):
                       + (chord(piece.ends[1], chain[k + 1].ends[0]) if after is not None else 0.0))
             aligned = piece.kind == "line" and np.min(np.abs(piece.dir)) < 1e-12
             smooth = (before is not None and after is not None
-                      and _smooth_departure(piece.ends[0], -_tangent(piece, 0), before, near)
-                      and _smooth_departure(piece.ends[1], _tangent(piece, 1), after, near))
+                      and _smooth_departure(piece.ends[0], -_tangent(piece, 0), q[before], near)
+                      and _smooth_departure(piece.ends[1], _tangent(piece, 1), q[after], near))
             if (smooth and not aligned) or own < (0.1 if aligned else 0.25) * (own + around):
                 free = np.r_[free, piece.run]
                 chain = chain[:k] + chain[k + 1:]
+                break
+        else:
+            return chain, free, stretch
+
+
+def _conic_stretches(chain, q, free, stretch, z_mid, thr, gap, angle_tol, min_support, rng):
+    """Stretches that one line or arc explains within noise become that conic
+    (`profile_pieces.conic_over`): where both a conic and a B-spline fit the data to the noise level the
+    simpler model wins, so a short face that extraction missed among the whole profile's points (a
+    chamfer seen by a few hundred of them) is not bridged by a spline.  Returns (chain, free, stretches)."""
+    extent = float(np.ptp(q, axis=0).max())
+    while True:
+        for k, idx in enumerate(stretch):
+            piece = None if idx is None else conic_over(idx, q, chain, thr, gap, angle_tol, min_support, extent, rng)
+            if piece is not None:
+                chain = _order(chain[:k + 1] + [piece] + chain[k + 1:], z_mid)
+                free = np.setdiff1d(free, piece.run)
+                stretch = _stretches(chain, q, free, z_mid, min_support)
                 break
         else:
             return chain, free, stretch
@@ -303,6 +325,8 @@ def fit_conic_profile(rz, *, thr: float, tol: float | None = None, statistic: st
     z_mid = float(np.median(rz[:, 1]))
     near = max(10 * thr, 0.02 * extent)
     chain, free, stretch = _absorb_into_stretches(_order(pieces, z_mid), rz, free, z_mid, min_support, near)
+    chain, free, stretch = _conic_stretches(chain, rz, free, stretch, z_mid, thr, 0.04 * extent, angle_tol,
+                                            min_support, np.random.default_rng(seed + 1))
     chain, stretch = _merge_collinear(chain, stretch, thr, angle_tol)
     tangent = [s is None and is_tangent(a, b, thr) for a, b, s in zip(chain, chain[1:], stretch)]
     for k in sorted((k for k, p in enumerate(chain) if p.kind == "arc"), key=lambda k: -chain[k].support):
@@ -312,7 +336,7 @@ def fit_conic_profile(rz, *, thr: float, tol: float | None = None, statistic: st
             chain[k] = refit_tangent_arc(chain[k], nbs, rz)
     joints = []   # per neighbouring pair: (end of the first, connecting Segment or None, start of the second)
     for k, (a, b) in enumerate(zip(chain, chain[1:])):
-        bridge = None if stretch[k] is None else _spline_joint(a, b, stretch[k], rz, thr, tol, statistic, near)
+        bridge = None if stretch[k] is None else _spline_joint(a, b, rz[stretch[k]], rz, thr, tol, statistic, near)
         ref = (a.ends[1] + b.ends[0]) / 2
         cand = intersections(a, b)
         if bridge is not None:

@@ -18,6 +18,7 @@ test, and the pieces' geometry (intersections, tangency, tangent-constrained arc
    (`profile_spline.noise_sigma`).  A hypothesis that fails is replaced by the best of the other kind,
    then looked for again within the failed run (a fillet under a chord); when all fail, the run is
    free-form data.  At the end each piece takes back the free points that are its inliers next to it.
+   `conic_over` gives the free stretches left between pieces a second chance on their own points.
 
 All lengths are in model units (mm).
 """
@@ -31,7 +32,8 @@ from scipy.spatial import cKDTree
 
 from rgm.fitters.profile_spline import noise_sigma
 
-__all__ = ["Piece", "extract_pieces", "intersections", "tangency", "is_tangent", "refit_tangent_arc", "along"]
+__all__ = ["Piece", "extract_pieces", "conic_over", "intersections", "tangency", "is_tangent", "refit_tangent_arc",
+           "along"]
 
 
 # ------------------------------------------------------------------------------ primitive fits
@@ -238,10 +240,14 @@ def along(piece, q):
 
 def _holds(piece, q, thr) -> bool:
     """The lack-of-fit test of the module docstring (step 2), after an occupancy test: at least half of 50
-    equal bins along the run hold a point (a run stitched together from scattered points is no face)."""
+    equal bins between the piece's ends (the run's 0.5 and 99.5 percentiles, as `_make_piece` places
+    them) hold a point (a run stitched together from scattered points is no face; a stray inlier a few mm
+    along the line beyond a short face is not part of it, and must not spread the bins)."""
     pts = q[piece.run]
     t = _positions(piece.kind, _params(piece), pts)
-    occupied = np.unique(np.minimum((50 * (t - t.min()) / max(np.ptp(t), 1e-300)).astype(int), 49))
+    lo, hi = np.percentile(t, [0.5, 99.5])
+    inside = t[(t >= lo) & (t <= hi)]
+    occupied = np.unique(np.minimum((50 * (inside - lo) / max(hi - lo, 1e-300)).astype(int), 49))
     if len(occupied) < 25:
         return False
     order = np.argsort(t)
@@ -262,6 +268,16 @@ def _proposals(where, pool, q, found, thr, gap, angle_tol, min_support, extent, 
     grown = [_grow(kind, params, q, pool, thr, gap, angle_tol, min_support)
              for kind, params, _ in _hypotheses(sample, thr, extent, rng, 300)]
     return [_tangent_to_faces(g, found, q, thr) for g in grown if g is not None]
+
+
+def conic_over(where, q, found, thr, gap, angle_tol, min_support, extent, rng):
+    """The line or arc that alone explains the points `where` (indices into q; a stretch that extraction
+    left to free form): grown over them only, holding the lack-of-fit test, and leaving fewer than
+    max(min_support, 10 %) of them outside its run; else None."""
+    for piece in _proposals(where, where, q, found, thr, gap, angle_tol, min_support, extent, rng):
+        if len(where) - piece.support < max(min_support, 0.1 * len(where)) and _holds(piece, q, thr):
+            return piece
+    return None
 
 
 def extract_pieces(q, thr, gap, angle_tol, min_support, rng):

@@ -16,8 +16,8 @@
    conic holds, B-splines refined by knot insertion (`rgm.fitters.profile2d`).
 
 The part frame: origin on the axis at the profile's lowest z, the axis as the frame's y axis (the paper's
-pin, Figure 7: profile in the x-y plane, revolved about y), x along the first principal direction of the
-points across the axis.
+pin, Figure 7: profile in the x-y plane, revolved about y), turned from the cloud's frame by the smallest
+rotation that takes y to the axis (`axis_frame`).
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ from rgm.errors import GeometryError
 from rgm.fitters.profile2d import Profile, fit_conic_profile
 from rgm.fitters.profile_spline import noise_sigma
 
-__all__ = ["axis_from_normals", "refine_axis", "profile_coordinates", "RevolutionFit", "fit_revolution"]
+__all__ = ["axis_from_normals", "refine_axis", "profile_coordinates", "RevolutionFit", "fit_revolution", "axis_frame"]
 
 
 def _unit(v):
@@ -85,7 +85,10 @@ def refine_axis(points, normals, axis_point, axis_dir, *, bins: int = 60, max_po
     """Refine an axis by minimising the profile's spread (module docstring, step 2), on at most
     `max_points` points (fixed-seed subsample).  Returns (point, direction, noise sigma of the profile
     (mm): from differences of consecutive r along z on the mantle and of z along r on the ends, which
-    cancel the profile's own shape, `profile_spline.noise_sigma`))."""
+    cancel the profile's own shape, `profile_spline.noise_sigma`; the direction's angular standard
+    uncertainty (radians): the larger principal standard deviation of the two tilt parameters,
+    s^2 (J^T J)^-1 with the solver's loss-weighted Jacobian J and s the residuals' robust scale
+    (1.4826 MAD))."""
     if len(points) > max_points:
         keep = np.random.default_rng(seed).choice(len(points), max_points, replace=False)
         points, normals = points[keep], normals[keep]
@@ -115,17 +118,26 @@ def refine_axis(points, normals, axis_point, axis_dir, *, bins: int = 60, max_po
     p, d = axis_of(sol.x)
     rz = profile_coordinates(points, p, d)
     along = [rz[mantle][np.argsort(rz[mantle, 1]), 0], rz[ends][np.argsort(rz[ends, 0]), 1]]
-    return p, d, noise_sigma(*(a for a in along if len(a) > 10))
+    cov = (1.4826 * np.median(np.abs(sol.fun))) ** 2 * np.linalg.pinv(sol.jac.T @ sol.jac)
+    angle_sigma = float(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)))
+    return p, d, noise_sigma(*(a for a in along if len(a) > 10)), angle_sigma
 
 
 @dataclass(frozen=True)
 class RevolutionFit:
     """frame : (4, 4) part frame -> cloud frame (columns x, y = axis, z, origin).  profile : the meridian
-    profile in (r, z) = (part x, part y).  sigma : robust noise scale of the profile points."""
+    profile in (r, z) = (part x, part y).  sigma : robust noise scale of the profile points (mm).
+    axis_sigma : standard uncertainty of the axis direction (radians; NaN when not measured)."""
 
     frame: np.ndarray
     profile: Profile
     sigma: float
+    axis_sigma: float = float("nan")
+
+    @property
+    def length(self) -> float:
+        """The profile's extent along the axis (mm)."""
+        return float(np.ptp(self.profile.vertices[:, 1]))
 
     def distance(self, points) -> np.ndarray:
         """(n,) exact distance of cloud-frame points (n, 3) to the full surface of revolution."""
@@ -153,21 +165,34 @@ def fit_revolution(points, normals, *, tol: float, statistic: str = "p95", axis_
     starts = [axis_from_normals(points, normals)]
     if axis_hint is not None and abs(starts[0][1] @ axis_hint) < 0.9:
         starts.append((points.mean(axis=0), _unit(np.asarray(axis_hint, float))))
-    p, d, sigma = min((refine_axis(points, normals, *start) for start in starts), key=lambda fit: fit[2])
+    p, d, sigma, axis_sigma = min((refine_axis(points, normals, *start) for start in starts), key=lambda fit: fit[2])
     d = d if d[np.argmax(np.abs(d))] > 0 else -d         # canonical: the axis' largest component positive
     rz = profile_coordinates(points if profile_points is None else np.asarray(profile_points, float), p, d)
     if len(rz) > max_profile_points:
         rz = rz[np.random.default_rng(seed).choice(len(rz), max_profile_points, replace=False)]
     thr = max(3.0 * sigma, tol / 4.0, 1e-9 * np.ptp(rz))
     profile = fit_conic_profile(rz, thr=thr, tol=tol, statistic=statistic, seed=seed)
-    # part frame: origin at the lowest profile z on the axis, y = axis
     z0 = float(profile.vertices[:, 1].min())
     shifted = Profile(tuple(s.shifted(np.array([0.0, -z0])) for s in profile.segments))
-    e = np.eye(3)[0] if abs(d[0]) < 0.9 else np.eye(3)[2]  # frame x: world x (or z) made normal to the axis
-    x = _unit(e - (e @ d) * d)
+    return RevolutionFit(axis_frame(p + z0 * d, d), shifted, sigma, axis_sigma)
+
+
+def axis_frame(origin, axis_dir) -> np.ndarray:
+    """(4, 4) part frame -> cloud frame with its origin at `origin` (3,) and its y axis along the unit
+    `axis_dir` (3,): the smallest rotation taking world y to the axis (about y x axis_dir; none when the
+    axis is y), so that a part whose axis is a world axis is placed by at most one 90 deg turn."""
+    y = np.array([0.0, 1.0, 0.0])
+    d = _unit(np.asarray(axis_dir, float))
+    k = np.cross(y, d)
+    s, c = np.linalg.norm(k), float(y @ d)
     frame = np.eye(4)
-    frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = x, d, np.cross(x, d), p + z0 * d
-    return RevolutionFit(frame, shifted, sigma)
+    if s > 1e-15:
+        kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]]) / s
+        frame[:3, :3] = np.eye(3) + s * kx + (1.0 - c) * (kx @ kx)           # Rodrigues' formula
+    elif c < 0:
+        frame[:3, :3] = np.diag([-1.0, -1.0, 1.0])                          # a half turn about z
+    frame[:3, 3] = origin
+    return frame
 
 
 def sample_revolution(profile: Profile, frame, spacing: float) -> np.ndarray:

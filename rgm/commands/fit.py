@@ -3,9 +3,10 @@
 Runs the fitting pipeline (`rgm.fitters.pipeline`): intake, outlier filtering, registration (only with
 --register; otherwise the views must be in one frame, possibly through --poses), splitting,
 superellipsoid classification, the exact builders or the free-form one (trimmed NURBS patches, by the
-range grid for a single range view), certificates, and writes the `.rgm` procedure (checked by the
-compiler's parser and type checker before it is written) and an optional JSON report with per-stage
-timings.  Exit codes: 0 written, 1 bad input or nothing could be modelled, 2 usage.
+range grid for a single range view), certificates, and writes the `.rgm` procedure and an optional JSON
+report with per-stage timings.  The procedure is written in canonical form (`rgmc fmt`) and only if
+`rgmc check` finds no error in that text (a fitter bug is reported, never written; warnings are printed).
+Exit codes: 0 written, 1 bad input or nothing could be modelled, 2 usage.
 """
 from __future__ import annotations
 
@@ -67,11 +68,14 @@ def run(args) -> int:
                            register=args.register, scale=args.scale, title=name)
     except (RgmError, ValueError, OSError) as exc:
         return _fail(str(exc))
-    problems = _check_text(result.text, str(out))
-    if problems:
-        return _fail("internal error: the generated .rgm does not check:\n" + problems)
+    text, problems, warnings = _canonical_checked(result.text, str(out))
+    if text is None:
+        return _fail(f"internal error (a bug in rgmc fit, nothing written): the generated {out.name} does not "
+                     f"{problems}")
+    for warning in warnings:
+        print(f"rgmc fit: warning in the generated {out.name}:\n{warning}", file=sys.stderr)
     try:
-        write_atomic(out, result.text, overwrite=True)
+        write_atomic(out, text, overwrite=True)
         if args.report:
             write_atomic(args.report, json.dumps(result.report, indent=2, default=float) + "\n", overwrite=True)
     except (OutputExists, OSError) as exc:
@@ -82,6 +86,8 @@ def run(args) -> int:
             dims = ", ".join(f"{k} = {v:.4f} mm" for k, v in part["params"].items())
             line += f"; {dims}; {_verdict(part['certificate'])}"
         print(line, file=sys.stderr)
+        if part.get("placement_snapped"):
+            print(f"  placement: {_snapped(part['placement_snapped'])}", file=sys.stderr)
         for patch in part.get("patches", []):
             if patch.get("certificate"):
                 nu, nv = patch["control_net"]
@@ -95,20 +101,40 @@ def run(args) -> int:
     return 0 if result.parts else 1
 
 
+def _snapped(info: dict) -> str:
+    """One line on what `rgm.fitters.emit.snapped_placement` snapped (or was refused)."""
+    if "rejected" in info:
+        return f"not snapped ({info['why']})"
+    said = []
+    if "axis" in info:
+        a = info["axis"]
+        said.append(f"axis snapped to {a['to']} (off by {a['angle_deg']:.4f} deg, within 3 uncertainties "
+                    f"{a['limit_deg']:.4f} deg)")
+    if "offset" in info:
+        said.append(f"offsets {', '.join(f'{k} {v:+.4f}' for k, v in info['offset'].items())} mm snapped to 0 "
+                    f"(resolution {info['resolution']:g} mm)")
+    return "; ".join(said) + ", certificate re-measured"
+
+
 def _verdict(cert: dict) -> str:
     stat = cert["statistic"]
     state = "holds" if cert["holds"] else "DOES NOT HOLD"
     return f"{stat} {cert[stat]:.4f} mm {'<=' if cert['holds'] else '>'} tol {cert['tol']:g}: {state}"
 
 
-def _check_text(text: str, filename: str) -> str:
-    """'' when the text parses and type-checks, else the rendered diagnostics."""
-    from rgm.compiler.check import check
+def _canonical_checked(text: str, filename: str):
+    """(canonical text, '', [rendered warnings]) when the text formats (`rgmc fmt`) and the formatted text
+    has no error under `rgmc check` (syntax, names, types, values); else (None, what failed with the
+    rendered diagnostics, [])."""
+    from rgm.commands.check import check_source
+    from rgm.commands.fmt import canonical
     from rgm.compiler.diagnostics import render
-    from rgm.compiler.parser import parse
 
-    program, diagnostics = parse(text, filename)
-    errors = [d for d in diagnostics if d.is_error]
-    if program is not None and not errors:
-        errors = [d for d in check(program).diagnostics if d.is_error]
-    return "\n".join(render(d, {filename: text}) for d in errors)
+    formatted, diagnostics = canonical(text, filename)
+    if formatted is None:
+        return None, "format:\n" + "\n".join(render(d, {filename: text}) for d in diagnostics), []
+    diagnostics = check_source(formatted, filename, None)
+    errors = [render(d, {filename: formatted}) for d in diagnostics if d.is_error]
+    if errors:
+        return None, "check:\n" + "\n".join(errors), []
+    return formatted, "", [render(d, {filename: formatted}) for d in diagnostics]

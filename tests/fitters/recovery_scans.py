@@ -2,6 +2,7 @@
 pin), superellipsoid clouds, YCB mesh views.  Everything from fixed seeds."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -140,6 +141,29 @@ def pin_views(*, chamfer=0.0, noise=0.03, outliers=0.05, seed=0, pose=np.eye(4),
         dirs += [(1, -0.5, 0.2), (-1, 0.5, -0.3)]
     return scan_views(lambda o, d: raycast_revolved(prof, o, d), dirs, np.array([0, PIN_LENGTH / 2, 0]),
                       PIN_LENGTH / 2 + 10, pitch=pitch, noise=noise, outliers=outliers, seed=seed, pose=pose)
+
+
+def one_line(text: str) -> str:
+    """The `.rgm` text with the formatter's breaks inside brackets undone (one argument per line, trailing
+    commas), so that a call can be looked for as a substring whatever its length."""
+    text = re.sub(r",\s*\n\s*([)\]])", r"\1", text)
+    text = re.sub(r"([(\[])\s*\n\s*", r"\1", text)
+    return re.sub(r",\s*\n\s*", ", ", text)
+
+
+def assert_rgm_clean(text, filename="part.rgm", *, path=None):
+    """The `.rgm` text formats and `rgmc check` reports no diagnostic at all (0 errors, 0 warnings); with
+    `path` (the file `rgmc fit` wrote, holding `text`) the file is also in canonical form
+    (`rgmc fmt --check` passes)."""
+    from rgm.cli import main
+    from rgm.commands.check import check_source
+    from rgm.commands.fmt import canonical
+
+    assert canonical(text, filename)[0] is not None, f"{filename} does not format"
+    diagnostics = check_source(text, filename, None)
+    assert diagnostics == [], [d.message for d in diagnostics]
+    if path is not None:
+        assert main(["fmt", "--check", str(path)]) == 0, f"{path} is not in canonical form"
 
 
 def random_rotation(rng):

@@ -42,7 +42,9 @@ def test_axis_from_noisy_points_with_outliers(seed):
     points[bad] += rng.normal(0, 5, (bad.sum(), 3))
     normals, _ = pca_normals(points)
     first = axis_from_normals(points, normals)
-    point, direction, sigma = refine_axis(points, normals, *first)
+    point, direction, sigma, angle_sigma = refine_axis(points, normals, *first)
     angle, offset = _errors(point, direction, pose)
     assert angle < 0.1 and offset < 0.02, (angle, offset)
     assert abs(sigma - 0.03) < 0.015                 # the profile's noise, not its shape
+    # the stated uncertainty of the direction covers its actual error (3 sigma) and is not vacuous
+    assert angle <= 3 * np.degrees(angle_sigma) < 0.1, (angle, np.degrees(angle_sigma))

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recovery_scans import random_rotation, revolved_cloud, sample_primitive, turned_profile
+from recovery_scans import assert_rgm_clean, random_rotation, revolved_cloud, sample_primitive, turned_profile
 from rgm.fitters.classify import QUALITY_FREE_FORM, CATEGORIES, category_scores, classify, split_parts
 from rgm.fitters.pipeline import fit_points
 from rgm.fitters.superellipsoid import Superellipsoid
@@ -99,6 +99,7 @@ def test_sphere_is_one_arc_revolved_with_a_radius_param():
     assert part["category"] == "sphere" and part["certificate"]["holds"]
     assert abs(part["params"]["radius"] - 30.0) < 0.01
     assert "profile(arc(pt(0, 0, 0), pt(radius, radius, 0), pt(0, 2 * radius, 0)))" in result.text
+    assert_rgm_clean(result.text)
     assert part["certificate"]["max"] < 0.2                                # closed at both poles
 
 
