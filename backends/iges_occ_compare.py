@@ -145,15 +145,22 @@ def _rectangle(u0, u1, v0, v1) -> list:
     return [line_curve(np.array(p, float), np.array(q, float)) for p, q in zip(c, c[1:])]
 
 
-def _face_boundary(obj, tol, occ_bounds) -> _Boundary:
+def _face_boundary(obj, tol, occ_bounds, preference: str = "auto") -> _Boundary:
     """The rgm curves bounding a face: its loops (plus the domain when it has no outer loop), or the
-    natural domain of a bare surface (a plane's: the extent the file gave it, OCC's `occ_bounds`)."""
+    natural domain of a bare surface (a plane's: the extent the file gave it, OCC's `occ_bounds`). A
+    lazy intersection piece is the curve of it the receiver takes (`pcurve_preference` as written):
+    its approximation in this surface's (u, v), or in model space under PREF = 2."""
     surface = obj.surface if isinstance(obj, TrimmedFace) else obj
     b = _Boundary(surface)
     loops = obj.loops() if isinstance(obj, TrimmedFace) else ()
     for loop in loops:
+        model_space = preference == "3d" or (preference == "auto" and all(
+            p.dim == 3 and not isinstance(p, IntersectionCurve) for p in loop.pieces))
         for piece in (q for p in loop.pieces for q in _pieces(p)):
-            (b.uv if piece.dim == 2 else b.xyz).append(_nurbs(piece, tol))
+            if isinstance(piece, IntersectionCurve) and not model_space:
+                b.uv.append(piece.uv_curves(surface, tol)[0])
+            else:
+                (b.uv if piece.dim == 2 else b.xyz).append(_nurbs(piece, tol))
     if not (isinstance(obj, TrimmedFace) and obj.outer is not None):
         (u0, u1), (v0, v1) = surface.domain if not isinstance(surface, Plane) else (occ_bounds[:2], occ_bounds[2:])
         b.uv += _rectangle(u0, u1, v0, v1)
@@ -237,7 +244,7 @@ def _cover(points_mm, edges, face, candidates: int = 2) -> np.ndarray:
     return best
 
 
-def _measure_face(face, obj, tol, mm, out: Measured, n: int = 7, count: int = 9):
+def _measure_face(face, obj, tol, mm, out: Measured, preference: str, n: int = 7, count: int = 9):
     from OCP.BRep import BRep_Tool
     from OCP.BRepAdaptor import BRepAdaptor_Surface
 
@@ -245,7 +252,7 @@ def _measure_face(face, obj, tol, mm, out: Measured, n: int = 7, count: int = 9)
     kind = _type(s)
     out.surface = max(out.surface, _surface_deviation(face, obj, mm, n))
     boundary = _face_boundary(obj, tol, (s.FirstUParameter(), s.LastUParameter(),
-                                         s.FirstVParameter(), s.LastVParameter()))
+                                         s.FirstVParameter(), s.LastVParameter()), preference)
     edges = _edges(face)
     face_3d = 0.0
     if edges:
@@ -280,9 +287,10 @@ def _measure_curve(shape, obj, tol, mm, out: Measured, count: int = 9):
     out.cover = float(_cover(boundary.samples(17) * mm, edges, None).max()) / mm
 
 
-def measure(model, shapes, tol: float | None = None) -> list[Measured]:
+def measure(model, shapes, tol: float | None = None, pcurve_preference: str = "auto") -> list[Measured]:
     """One `Measured` per exported object, against the OCC shape transferred from its root (`shapes`
-    in export order). Faces of a shell are matched to the shell's faces in order."""
+    in export order), for a file written with `tol` (default the model's) and `pcurve_preference`.
+    Faces of a shell are matched to the shell's faces in order."""
     tol = model.tolerance if tol is None else tol
     mm = MM.get(model.units, 1.0)
     out = []
@@ -296,6 +304,6 @@ def measure(model, shapes, tol: float | None = None) -> list[Measured]:
             if len(occ_faces) != len(faces) and not isinstance(obj, Surface):
                 m.surface = np.inf
             for i, face in enumerate(occ_faces):
-                _measure_face(face, faces[min(i, len(faces) - 1)], tol, mm, m)
+                _measure_face(face, faces[min(i, len(faces) - 1)], tol, mm, m, pcurve_preference)
         out.append(m)
     return out

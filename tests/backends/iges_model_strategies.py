@@ -256,11 +256,22 @@ def _distance_to(surface, pts) -> np.ndarray:
 
 
 def assert_same_approximation(a: IntersectionCurve, b, tol: float, where: str):
-    """`b` is the file's curve of the lazy intersection `a`: the approximation at `tol` (bit-identical
-    NURBS data) and within `tol` of both operand surfaces (65 points measured by rgm's inversion)."""
+    """`b` is the file's curve of the lazy intersection `a`: its approximation at `tol` (bit-identical
+    NURBS data; in model space, or, as a loop piece read from its pcurve, in an operand's (u, v)) and
+    within `tol` of both operand surfaces (65 points measured by rgm's inversion)."""
     assert isinstance(b, BSplineCurve), f"{where}: {type(b).__name__}"
-    _same_nurbs_curve(a.nurbs(tol), b.curve, where)
-    pts = b.curve.evaluate(np.linspace(*b.curve.domain, 65))
+    t = np.linspace(*b.curve.domain, 65)
+    if b.dim == 3:
+        _same_nurbs_curve(a.nurbs(tol), b.curve, where)
+        pts = b.curve.evaluate(t)
+    else:
+        on = [s for s in (a.a, a.b) if np.array_equal(a.uv_curves(s, tol)[0].ctrl, b.curve.ctrl)]
+        assert on, f"{where}: not the approximation in either operand's parameters"
+        _same_nurbs_curve(a.uv_curves(on[0], tol)[0], b.curve, where)
+        from rgm.backends.iges_curves import surface_points
+
+        uv = b.curve.evaluate(t)
+        pts = surface_points(on[0], uv[:, 0], uv[:, 1])
     for s in (a.a, a.b):
         assert _distance_to(s, pts).max() <= tol, f"{where}: off an operand surface"
 
@@ -371,7 +382,7 @@ def assert_opencascade_reads(model: Model, path, *, nurbs_only: bool = False, pc
     assert occ.fails == [], occ.fails
     assert occ.roots == occ.transferred == len(occ.shapes) == len(exported), (occ.roots, occ.transferred)
     size = model_size(model)
-    measured = measure(model, occ.shapes)
+    measured = measure(model, occ.shapes, pcurve_preference=pcurve_preference)
     for obj, m in zip(exported, measured):
         assert m.worst <= limit * size, m
         faces = obj.faces if isinstance(obj, Shell) else [obj]
