@@ -7,7 +7,8 @@ sweeping 2 pi about the same axis, generatrices joined end to start, as rgm's wr
 `Revolution` (of a `Polyline` when every generatrix is a line). A 510's loops are built from the
 pcurves of its edge uses, or, on a 120 (whose IGES (u, v) is not rgm's) or where a use has no pcurve,
 from the edges' model-space curves in the sense of the use; vertex uses (poles) add nothing then.
-Face and shell orientation flags are not kept: rgm's shells carry no orientation.
+Face and shell orientation flags are not kept: rgm's shells carry no orientation. 190 plane surfaces
+(OpenCASCADE's BRep mode puts planar faces on them) are read as planes.
 """
 from __future__ import annotations
 
@@ -15,13 +16,13 @@ import numpy as np
 
 from rgm.errors import GeometryError
 from rgm.model import (
-    BSplineCurve, Circle, CircularArc, CompositeCurve, Line, Loop, Polyline, Revolution, Shell, TrimmedFace,
+    BSplineCurve, Circle, CircularArc, CompositeCurve, Line, Loop, Plane, Polyline, Revolution, Shell, TrimmedFace,
 )
 
 __all__ = ["BrepReading", "BREP_TYPES", "reversed_curve"]
 
-#: entity types of the manifold solid B-rep
-BREP_TYPES = {186, 502, 504, 508, 510, 514}
+#: entity types of the manifold solid B-rep (and 190, the plane surface OpenCASCADE's faces use)
+BREP_TYPES = {186, 190, 502, 504, 508, 510, 514}
 
 
 def reversed_curve(curve):
@@ -61,6 +62,8 @@ class BrepReading:
             return 3 + d.int(de, 2)
         if t == 508:
             return 1 + sum(5 + 2 * len(u[4]) for u in self.brep_uses(de))
+        if t == 190:
+            return 3 if self.d.entries[de].form == 1 else 2
         return 1 + (5 if t == 504 else 3) * d.int(de, 1)
 
     def brep_children(self, de: int, t: int) -> list[int]:
@@ -76,6 +79,8 @@ class BrepReading:
         if t == 504:
             rows = np.array(d.ints(de, 2, 5 * d.int(de, 1)), int).reshape(-1, 5)
             return sorted(set(rows[:, [0, 1, 3]].ravel().tolist()))
+        if t == 190:
+            return d.ints(de, 1, self.brep_own_count(de, t))
         return []
 
     # -- conversion ---------------------------------------------------------------------------------
@@ -94,6 +99,14 @@ class BrepReading:
         loops = [Loop(tuple(self._brep_loop(lp, surface)), name=self.name(lp)) for lp in d.ints(de, 4, d.int(de, 2))]
         outer = d.int(de, 3) == 1
         return TrimmedFace(surface, loops[0] if outer else None, tuple(loops[1:] if outer else loops))
+
+    def _e190(self, de, dim):
+        """Plane surface: location (116), normal (123) and, form 1 (parametrised), the reference
+        direction (123) of u; v along normal x reference, as rgm's plane coordinates."""
+        ptrs = self.d.ints(de, 1, self.brep_own_count(de, 190))
+        point = self.get(ptrs[0])
+        normal, *ref = (self.d.reals(p, 1, 3) for p in ptrs[1:])
+        return Plane(point.xyz, normal, ref[0] if ref else None)
 
     def _brep_loop(self, de: int, surface) -> list:
         if self.d.entries[de].type != 508:

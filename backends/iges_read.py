@@ -3,7 +3,7 @@
 Supported entities: 100 arc/circle, 102 composite, 106 forms 11/12/13/63 (polylines), 108 form 0
 (unbounded plane), 110 line (form 0), 112/114 parametric splines (exact B-splines), 116 point, 120 surface of revolution, 124 transformation (applied through DE field 7), 126 and 128
 (rational B-splines; parameter sub-ranges are split off exactly), 142 curve on surface, 144 trimmed
-surface, 186/514/510/508/504/502 (manifold solid B-rep → shell or revolution, `iges_brep_read`), 402
+surface, 186/514/510/508/504/502 and 190 (manifold solid B-rep → shell or revolution, `iges_brep_read`), 402
 forms 1/7 (group → shell), 406 form 15 (names) and 314 (colour, read and ignored: the model has no
 colours). Anything else is reported by type, form and DE number (`IgesImport.unsupported`);
 entities whose data are invalid are reported with the reason (`IgesImport.problems`); nothing is
