@@ -455,14 +455,15 @@ def face_samples(objs, samples: int = 60):
     return np.concatenate(pts), size
 
 
-def write_mesh(model, path, *, fmt: str, tol: float, angle_tol: float | None = None, **ignored):
-    """Tessellate `model` and write it through trimesh as binary STL, OBJ, PLY or GLB, atomically."""
+def write_mesh(model, path, *, fmt: str, tol: float | None = None, angle_tol: float | None = None, **ignored):
+    """Tessellate `model` and write it through trimesh as binary STL, OBJ, PLY or GLB, atomically.
+    `tol` (model units) defaults to the model's `tolerance`."""
     from rgm.atomic import write_atomic
 
     fmt = fmt.lower()
     if fmt not in ("stl", "obj", "ply", "glb"):
         raise BackendError(f"unknown mesh format {fmt!r}; choose stl, obj, ply or glb")
-    vertices, triangles = tessellate(model, tol, angle_tol)
+    vertices, triangles = tessellate(model, model.tolerance if tol is None else tol, angle_tol)
     import trimesh
 
     data = trimesh.Trimesh(vertices, triangles, process=False).export(file_type=fmt)

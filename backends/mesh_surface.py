@@ -60,8 +60,13 @@ class Patch:
         return np.column_stack([np.clip(uv[:, 0], u0, u1), np.clip(uv[:, 1], v0, v1)])
 
     def normal(self, u, v) -> np.ndarray:
-        """Unit normals Su x Sv (m, 3); zero rows where the surface is degenerate (poles)."""
-        _, su, sv = self.d1(u, v)
+        """Unit normals Su x Sv (m, 3), taken a relative 1e-9 inside the domain: on a patch restricted
+        between creases the derivatives on its edges are then the one-sided ones of this patch (not of
+        its neighbour across the crease), and at a pole the limit normal along that parameter line.
+        Zero rows where the surface is degenerate even so."""
+        (u0, u1), (v0, v1) = self.domain
+        eu, ev = 1e-9 * (u1 - u0), 1e-9 * (v1 - v0)
+        _, su, sv = self.d1(np.clip(u, u0 + eu, u1 - eu), np.clip(v, v0 + ev, v1 - ev))
         n = np.cross(su, sv)
         length = np.linalg.norm(n, axis=1, keepdims=True)
         return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-300)

@@ -116,6 +116,14 @@ def _writer(target: str):
     return writer
 
 
+def _keywords(writer) -> set:
+    """The keyword arguments a writer takes by name (its options), without `model`, `path` and **extras."""
+    import inspect
+
+    params = inspect.signature(writer).parameters.values()
+    return {p.name for p in params if p.kind in (p.KEYWORD_ONLY, p.POSITIONAL_OR_KEYWORD)} - {"model", "path"}
+
+
 def run(args) -> int:
     from rgm.commands.check import emit, internal_error, parse_defines, read_sources
     from rgm.compiler.diagnostics import summary
@@ -158,12 +166,22 @@ def run(args) -> int:
         print(f"rgmc compile: error: {exc}", file=sys.stderr)
         return 1
     kwargs = dict(TARGETS[args.target][2])
-    if args.target in MESH_TARGETS:
-        kwargs.update(tol=args.tol, angle_tol=args.angle)
-    elif args.tol is not None:
-        kwargs["tol"] = args.tol
-    if args.verify:
-        kwargs["verify"] = True
+    asked = {"tol": args.tol, "angle_tol": args.angle, "verify": args.verify or None}
+    accepted = _keywords(writer)
+    for key, value in asked.items():
+        if value is None:
+            continue
+        if key not in accepted:
+            flag = {"tol": "--tol", "angle_tol": "--angle", "verify": "--verify"}[key]
+            print(f"rgmc compile: error: -t {args.target} does not take {flag}", file=sys.stderr)
+            return 2
+        kwargs[key] = value
+    unknown = sorted(set(options) - accepted)
+    if unknown:
+        known = ", ".join(sorted(accepted - {"tol", "angle_tol", "verify", "fmt"})) or "none"
+        print(f"rgmc compile: error: -t {args.target} has no option {', '.join(unknown)} (its options: {known})",
+              file=sys.stderr)
+        return 2
     kwargs.update(options)
     existed = out.exists()
     try:
@@ -191,11 +209,15 @@ def _write(writer, model, out: Path, kwargs: dict, target: str, existed: bool) -
 
     try:
         writer(model, out, **kwargs)
-    except (RgmError, TypeError, OSError) as exc:
+    except Exception as exc:  # noqa: BLE001 - reported with a message, never a traceback
         if not existed and out.exists():
             out.unlink()  # a writer that failed must leave nothing behind
-        kinds = {TypeError: "the back end rejected an option", OSError: "cannot write the output"}
-        kind = next((k for cls, k in kinds.items() if isinstance(exc, cls)), f"{target} back end")
+        if isinstance(exc, RgmError):
+            kind = f"{target} back end"
+        elif isinstance(exc, OSError):
+            kind = "cannot write the output"
+        else:
+            kind = f"internal error in the {target} back end ({type(exc).__name__}; please report it)"
         print(f"rgmc compile: error: {kind}: {exc}", file=sys.stderr)
         return 1
     print(f"wrote {out} ({target})", file=sys.stderr)

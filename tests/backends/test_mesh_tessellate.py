@@ -239,3 +239,19 @@ def test_trim_loop_of_3d_curves_across_a_seam():
     rim = np.unique(np.stack([keys[n == 1] // len(v), keys[n == 1] % len(v)]))
     assert np.abs(np.abs(v[rim, 2]) - 10).max() < 1e-9           # open only along the two circles
     assert area(v, t) == pytest.approx(2 * np.pi * 5 * 20, abs=tol * 2 * (2 * np.pi * 5))
+
+
+def test_angle_tolerance_on_faces_meeting_at_creases():
+    """The pin's faces meet at creases (its profile's corners): each face's normals on its own edges are
+    its own one-sided ones, so the angle refinement terminates, and every triangle's normal is within
+    the angle tolerance of its face's normals at its corners."""
+    angle = np.radians(4)
+    mesh = tessellate_mesh(pin_model(), 0.1, angle)
+    for f in mesh.faces:
+        v = mesh.vertices[f.tri]
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        ns = f.patch.normal(f.tri_uv[..., 0].ravel(), f.tri_uv[..., 1].ravel()).reshape(-1, 3, 3)
+        cos = np.abs(np.einsum("td,tkd->tk", n, ns))     # orientation aside (faces may be flipped outwards)
+        assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() <= np.degrees(angle) + 1e-6
+    assert len(mesh.triangles) > len(tessellate(pin_model(), 0.1)[1])

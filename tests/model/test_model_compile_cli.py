@@ -36,11 +36,13 @@ def fake_backend(monkeypatch):
     module.calls = []
     module.fail = False
 
-    def write_fake(model, path, **opts):
+    def write_fake(model, path, *, fmt=None, tol=None, angle_tol=None, verify=False, schema=None, n=None, flat=None):
+        opts = {k: v for k, v in dict(fmt=fmt, tol=tol, angle_tol=angle_tol, verify=verify, schema=schema, n=n,
+                                      flat=flat).items() if v is not None and v is not False}
         module.calls.append((model, path, opts))
         path.write_text("partial")
         if module.fail:
-            raise BackendError("cannot lower this model (test)")
+            raise module.fail
 
     module.write_fake = write_fake
     monkeypatch.setitem(sys.modules, "rgm.backends._fake", module)
@@ -63,15 +65,34 @@ def test_mesh_targets_get_format_and_angle_in_radians(pin, tmp_path, fake_backen
     rc = main(["compile", str(pin), "-t", "stl", "-o", str(tmp_path / "p.stl"), "--angle", "10"])
     assert rc == 0
     opts = fake_backend.calls[0][2]
-    assert opts["fmt"] == "stl" and opts["tol"] is None and opts["angle_tol"] == pytest.approx(math.radians(10))
+    assert opts["fmt"] == "stl" and "tol" not in opts and opts["angle_tol"] == pytest.approx(math.radians(10))
 
 
 def test_backend_error_leaves_no_file(pin, tmp_path, fake_backend, capsys):
-    fake_backend.fail = True
+    fake_backend.fail = BackendError("cannot lower this model (test)")
     out = tmp_path / "pin.igs"
     assert main(["compile", str(pin), "-t", "iges", "-o", str(out)]) == 1
     assert not out.exists()
     assert "cannot lower this model (test)" in capsys.readouterr().err
+
+
+def test_a_back_end_bug_is_reported_as_one_and_leaves_no_file(pin, tmp_path, fake_backend, capsys):
+    fake_backend.fail = ZeroDivisionError("float division by zero")
+    out = tmp_path / "pin.igs"
+    assert main(["compile", str(pin), "-t", "iges", "-o", str(out)]) == 1
+    err = capsys.readouterr().err
+    assert "internal error in the iges back end" in err and "Traceback" not in err and not out.exists()
+
+
+def test_unknown_options_and_flags_a_target_does_not_take_are_usage_errors(pin, tmp_path, fake_backend,
+                                                                             monkeypatch, capsys):
+    assert main(["compile", str(pin), "-t", "iges", "-o", str(tmp_path / "p.igs"), "--option", "bogus=1"]) == 2
+    assert "has no option bogus (its options: flat, n, schema)" in capsys.readouterr().err
+    fake_backend.write_plain = lambda model, path: path.write_text("x")
+    monkeypatch.setitem(compile_cmd.TARGETS, "alpha1", ("rgm.backends._fake", "write_plain", {}))
+    assert main(["compile", str(pin), "-t", "alpha1", "-o", str(tmp_path / "p.a1"), "--verify"]) == 2
+    assert "-t alpha1 does not take --verify" in capsys.readouterr().err
+    assert not fake_backend.calls and not (tmp_path / "p.a1").exists()
 
 
 def test_missing_backend_is_a_clear_error(pin, tmp_path, monkeypatch, capsys):
