@@ -25,7 +25,7 @@ import numpy as np
 from rgm.errors import BackendError
 from rgm.model import (
     BSplineCurve, BSplineSurface, Circle, CircularArc, CompositeCurve, Extrusion, HPoint, IntersectionCurve, Line,
-    Loop, Model, Plane, Point, Polyline, Revolution, RuledSurface, Shell, TrimmedFace, Vector,
+    Loop, Model, Plane, Point, Polyline, Revolution, RuledSurface, Shell, Transform, TrimmedFace, Vector,
 )
 
 
@@ -221,8 +221,8 @@ def alpha1_text(model) -> str:
         w.lines.append(f"{identifier(key, w.taken)} := {body};")
     for key in model.exports:
         w.statement(key, model.objects[key])
-    for key, obj in model.objects.items():
-        if id(obj) not in w.names and key not in scalars:
+    for key, obj in model.objects.items():   # transform values are not geometry: place() baked them in
+        if id(obj) not in w.names and key not in scalars and not isinstance(obj, Transform):
             w.statement(key, obj)
     src = f" from {Path(model.source).name}" if model.source else ""
     head = [f"# Alpha_1 shape_edit procedure written by rgm{src}", f'units := "{model.units}";',

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from rgm.compiler.diagnostics import Span
 from rgm.errors import GeometryError
 from rgm.model.base import ModelObject, frozen_array
@@ -47,7 +49,10 @@ class Loop(ModelObject):
 
         return any(isinstance(p, IntersectionCurve) for p in self.pieces)
 
-    def transform(self, matrix, memo: dict | None = None):
+    def transform(self, matrix, memo: dict | None = None, uv_matrix=None):
+        """The loop moved with its face: 3-D pieces by `matrix`; parameter-space pieces stay (the
+        surface's parameterisation moves with it) unless `uv_matrix` (4x4 acting on (u, v, 0)) says how
+        the face's (u, v) change, as a plane's metric coordinates do under a scaling."""
         from rgm.model.lazy import IntersectionCurve
 
         out = []
@@ -55,7 +60,7 @@ class Loop(ModelObject):
             if isinstance(p, IntersectionCurve):
                 out.append(p.transform(matrix, memo))
             elif p.dim == 2:
-                out.append(p)  # parameter-space curves do not move with the surface
+                out.append(p if uv_matrix is None else p.transform(uv_matrix))
             else:
                 out.append(p.transform(matrix))
         return replace(self, pieces=tuple(out))
@@ -79,11 +84,18 @@ class TrimmedFace(ModelObject):
 
     def transform(self, matrix, memo: dict | None = None):
         # The memo keeps operand identity, so an intersection piece still knows it lies on this surface.
+        # A plane's (u, v) are lengths along its unit axes, which a transform keeps unit: a scaling by s
+        # scales the plane coordinates of every point by s (rotations and mirrors keep them).
+        from rgm.model.base import _scale_of
+        from rgm.model.surfaces import Plane
+
         memo = {} if memo is None else memo
         surface = memo.setdefault(id(self.surface), self.surface.transform(matrix))
+        s = _scale_of(matrix)
+        uv = np.diag([s, s, 1.0, 1.0]) if isinstance(self.surface, Plane) and s != 1.0 else None
         return replace(self, surface=surface,
-                       outer=None if self.outer is None else self.outer.transform(matrix, memo),
-                       holes=tuple(h.transform(matrix, memo) for h in self.holes))
+                       outer=None if self.outer is None else self.outer.transform(matrix, memo, uv),
+                       holes=tuple(h.transform(matrix, memo, uv) for h in self.holes))
 
 
 @dataclass(frozen=True, eq=False)

@@ -82,3 +82,19 @@ def test_rgm_alpha1_model_for_the_examples(path, tmp_path):
     for name, value in model.objects.items():
         if isinstance(value, float):
             assert back.objects[name] == value
+
+
+def test_transform_values_are_baked_not_written():
+    """A `transform` binding is not geometry: the Alpha_1 text holds what `place` made of it (the placed
+    circle, bit-identical), and no statement for the transform itself."""
+    import rgm
+
+    source = ("units mm;\nt := rotation(vec(0, 0, 1), 90deg) * translation(vec(10mm, 0, 0));\n"
+              "ring := circle(pt(40mm, 0, 0), 5mm);\nplaced := place(ring, t);\nexport placed;\n")
+    model = rgm.loads(source)
+    text = alpha1_text(model)
+    assert not re.search(r"^t :=", text, re.M)
+    back = read_alpha1(text)
+    assert "t" not in back.objects
+    np.testing.assert_array_equal(back.objects["placed"].center, model.objects["placed"].center)
+    assert back.objects["placed"].radius == model.objects["placed"].radius

@@ -95,3 +95,27 @@ def test_exported_defaults_to_surfaces_when_nothing_is_exported():
     model = Model("mm", 0.01, {"l": line, "s": surf})
     assert model.exported() == [surf]
     assert Model("mm", 0.01, {"l": line, "s": surf}, exports=("l",)).exported() == [line]
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(0.1, 10), st.floats(-3, 3), st.booleans(), st.integers(0, 2**16))
+def test_trimmed_plane_loops_follow_a_similarity(factor, angle, mirrored, seed):
+    """A plane's (u, v) are lengths along its unit axes: after any similarity (scale, rotation, mirror)
+    the parameter-space loop of a trimmed plane still traces the transformed trim in space."""
+    from rgm.model import Loop, Polyline, TrimmedFace
+
+    rng = np.random.default_rng(seed)
+    plane = Plane(rng.uniform(-5, 5, 3), rng.normal(size=3))
+    ring = Polyline(np.vstack([rng.uniform(-3, 3, (5, 2)), [[0.0, 0.0]]])[[0, 1, 2, 3, 4, 0]])
+    face = TrimmedFace(plane, Loop((ring,)))
+    matrix = rotation(rng.normal(size=3), angle, rng.uniform(-2, 2, 3)) @ scaling(factor, rng.uniform(-2, 2, 3))
+    if mirrored:
+        matrix = mirroring(Plane(rng.uniform(-1, 1, 3), rng.normal(size=3))) @ matrix
+    moved = face.transform(matrix)
+
+    def in_space(f):
+        uv = f.outer.pieces[0].nurbs().ctrl
+        return f.surface.origin + uv[:, :1] * f.surface.x_dir + uv[:, 1:] * f.surface.y_dir
+
+    expected = in_space(face) @ matrix[:3, :3].T + matrix[:3, 3]
+    assert np.abs(in_space(moved) - expected).max() <= 1e-12 * (1 + np.abs(expected).max())
