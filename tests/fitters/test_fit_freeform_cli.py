@@ -24,7 +24,8 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 FRAN = DATA / "fran" / "fran_cut.ply"
 BUNNY = DATA / "bunny" / "bun000_crop.ply"
 BIRDBATH = DATA / "vases" / "birdbath_view.ply"
-FIT = re.compile(r"@fit\(points: (\d+), max: ([0-9.]+)mm, rms: ([0-9.]+)mm, p95: ([0-9.]+)mm, tol: ([0-9.]+)mm")
+FIT = re.compile(r"@fit\(\s*points: (\d+),\s*max: ([0-9.]+)mm,\s*rms: ([0-9.]+)mm,\s*p95: ([0-9.]+)mm,"
+                 r"\s*tol: ([0-9.]+)mm")      # the canonical (rgmc fmt) layout: one field a line
 
 
 def fit(tmp, scan, tol, *extra):
@@ -70,17 +71,14 @@ def test_a_hand_edit_that_breaks_the_face_certificate_fails_verify(face):
     """Raising one row of the control net by 3 mm (a 'design change' away from the scan) makes the
     re-measured figures grow past what the file records: `rgmc verify` exits 1."""
     tmp, _, text, _ = face
-    rows = re.search(r"net: net (\d+) x (\d+) \[\n(.*?)\]\);", text, re.S)
-    lines = rows.group(3).split("\n")
-    middle = len(lines) // 2
-
-    def lifted(entry):
-        x, y, z = map(float, entry.split())
-        return f"{x:g} {y:g} {z + 3:g}"
-
-    lines[middle] = " " * 8 + ", ".join(lifted(e) for e in lines[middle].strip().rstrip(",").split(", ")) + ","
+    found = re.search(r"net: net (\d+) x (\d+) \[\n(.*?)\]", text, re.S)
+    nu, nv = int(found.group(1)), int(found.group(2))
+    net = np.array([[float(c) for c in e.split()] for e in found.group(3).replace("\n", " ").split(",")
+                    if e.strip()]).reshape(nu, nv, 3)
+    net[nu // 2, :, 2] += 3.0
+    rows = ",\n".join(" " * 8 + ", ".join(f"{x!r} {y!r} {z!r}" for x, y, z in row) for row in net)
     edited = tmp / "edited.rgm"
-    edited.write_text(text.replace(rows.group(3), "\n".join(lines)))
+    edited.write_text(text.replace(found.group(3), rows + "\n"))
     assert main(["verify", str(edited), str(FRAN), "--scale", "1000"]) == 1
 
 
@@ -154,7 +152,7 @@ def test_planar_cut_is_a_described_intersection_in_the_rgm(cut_part):
     tmp, text, report = cut_part
     (patch,) = patches(report)
     assert patch["certificate"]["holds"] and patch["loops"]["cuts"] == 1
-    assert text.count("intersect(surface, plane(") == 1
+    assert len(re.findall(r"intersect\(\s*surface,\s*plane\(", text)) == 1
     face = rgm.load(tmp / "part.rgm").objects["part"]
     (cut,) = [p for p in face.outer.pieces if isinstance(p, IntersectionCurve)]
     assert cut.computed == ()                                # described, not computed, by compiling
