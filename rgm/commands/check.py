@@ -114,3 +114,20 @@ def run(args) -> int:
     emit(diagnostics, sources, args.format)
     print(summary(diagnostics), file=sys.stderr)
     return 1 if any(d.is_error for d in diagnostics) else 0
+
+
+def canonical_checked(text: str, filename: str):
+    """(canonical text, '', [rendered warnings]) when the text formats (`rgmc fmt`) and the formatted text
+    has no error under `rgmc check` (syntax, names, types, values); else (None, what failed with the
+    rendered diagnostics, []). What `rgmc fit` and `rgmc import` pass every generated file through before
+    writing it: a generator bug is reported, never written."""
+    from rgm.commands.fmt import canonical
+
+    formatted, diagnostics = canonical(text, filename)
+    if formatted is None:
+        return None, "format:\n" + "\n".join(render(d, {filename: text}) for d in diagnostics), []
+    diagnostics = check_source(formatted, filename, None)
+    errors = [render(d, {filename: formatted}) for d in diagnostics if d.is_error]
+    if errors:
+        return None, "check:\n" + "\n".join(errors), []
+    return formatted, "", [render(d, {filename: formatted}) for d in diagnostics]

@@ -21,6 +21,7 @@ import json
 import sys
 from pathlib import Path
 
+from rgm.commands.check import canonical_checked
 from rgm.fitters.certificate import STATISTICS
 
 
@@ -68,7 +69,7 @@ def run(args) -> int:
                            register=args.register, scale=args.scale, title=name)
     except (RgmError, ValueError, OSError) as exc:
         return _fail(str(exc))
-    text, problems, warnings = _canonical_checked(result.text, str(out))
+    text, problems, warnings = canonical_checked(result.text, str(out))
     if text is None:
         return _fail(f"internal error (a bug in rgmc fit, nothing written): the generated {out.name} does not "
                      f"{problems}")
@@ -120,21 +121,3 @@ def _verdict(cert: dict) -> str:
     stat = cert["statistic"]
     state = "holds" if cert["holds"] else "DOES NOT HOLD"
     return f"{stat} {cert[stat]:.4f} mm {'<=' if cert['holds'] else '>'} tol {cert['tol']:g}: {state}"
-
-
-def _canonical_checked(text: str, filename: str):
-    """(canonical text, '', [rendered warnings]) when the text formats (`rgmc fmt`) and the formatted text
-    has no error under `rgmc check` (syntax, names, types, values); else (None, what failed with the
-    rendered diagnostics, [])."""
-    from rgm.commands.check import check_source
-    from rgm.commands.fmt import canonical
-    from rgm.compiler.diagnostics import render
-
-    formatted, diagnostics = canonical(text, filename)
-    if formatted is None:
-        return None, "format:\n" + "\n".join(render(d, {filename: text}) for d in diagnostics), []
-    diagnostics = check_source(formatted, filename, None)
-    errors = [render(d, {filename: formatted}) for d in diagnostics if d.is_error]
-    if errors:
-        return None, "check:\n" + "\n".join(errors), []
-    return formatted, "", [render(d, {filename: formatted}) for d in diagnostics]

@@ -1,5 +1,6 @@
 """`rgmc import FILE.igs|FILE.iges|FILE.a1 [-o OUT.rgm] [--force]`: an IGES or Alpha_1 file as an
-editable `.rgm` procedure.
+editable `.rgm` procedure, in canonical layout (`rgmc fmt --check` passes) and checked (`rgmc check`
+finds no error) before it is written.
 
 Entities the reader does not support are listed on stderr by type, form and DE number (the rest is
 imported); a malformed file is an error naming the record. Without `-o` the text goes to stdout.
@@ -41,6 +42,7 @@ class _Fail(Exception):
 def run(args) -> int:
     from rgm.atomic import OutputExists, write_atomic
     from rgm.backends.rgm_source import model_to_rgm
+    from rgm.commands.check import canonical_checked
     from rgm.errors import RgmError
 
     path = Path(args.file)
@@ -51,7 +53,15 @@ def run(args) -> int:
         if not model.objects:
             print(f"{path}: error: nothing to import", file=sys.stderr)
             return 1
-        text = model_to_rgm(model, header=f"imported from {path.name} by rgmc import")
+        name = args.output or "<stdout>"
+        text, problems, warnings = canonical_checked(
+            model_to_rgm(model, header=f"imported from {path.name} by rgmc import"), name)
+        if text is None:
+            print(f"rgmc import: internal error (a bug in rgmc import, nothing written): the generated "
+                  f"{name} does not {problems}", file=sys.stderr)
+            return 1
+        for warning in warnings:
+            print(f"rgmc import: warning in the generated {name}:\n{warning}", file=sys.stderr)
         if args.output:
             out = Path(args.output)
             if out.resolve() == path.resolve():

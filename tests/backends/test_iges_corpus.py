@@ -40,6 +40,7 @@ def test_sample_imports_or_names_what_it_does_not_support(path):
                                   "144-000.igs", "114-000.igs", "112-000.igs",
                                   "124-001.igs", "106-012.igs", "100-000.igs", "102-000.igs"])
 def test_rgmc_import_writes_rgm_that_compiles(tmp_path, capsys, name):
+    """What `rgmc import` writes is canonical (`rgmc fmt --check` passes), checks clean and compiles."""
     import rgm
 
     out = tmp_path / "x.rgm"
@@ -49,6 +50,7 @@ def test_rgmc_import_writes_rgm_that_compiles(tmp_path, capsys, name):
     if code == 0:
         model = rgm.load(out)
         assert model.exports
+        assert main(["fmt", "--check", str(out)]) == 0 and main(["check", str(out)]) == 0
     else:
         assert "nothing to import" in err and "unsupported IGES entity" in err
 
