@@ -66,6 +66,18 @@ def segment_distance(q, a, b):
     return np.linalg.norm(q - (a + t[..., None] * ab), axis=-1)
 
 
+def _parallel(a, b, eps):
+    """Whether two pieces' probes (17, 3) at the same parameters coincide within eps as they are (True) or
+    with one reversed (False); None when neither: the pieces are parameterised differently (or differ).
+    Coincident edges of a shell and the two sides of a seam are usually the same curve, and then a
+    member's parameters are its representative's, with no inversion."""
+    if np.abs(a - b).max() < eps:
+        return True
+    if np.abs(a - b[::-1]).max() < eps:
+        return False
+    return None
+
+
 def _invert(piece, pts, iterations=8):
     """Parameters s (k,) of the points of piece closest to pts (k, 3): nearest of 513 samples, then up to
     `iterations` Newton steps on (C(s) - X) . C'(s) = 0 with central differences (one batched
@@ -97,7 +109,8 @@ class Edges:
 
         self.tol, self.eps = tol, eps
         self.pieces = [p for f in faces for loop in f.loops for p in loop]
-        ends = np.concatenate([p.xyz(np.array([0.0, 1.0])) for p in self.pieces])
+        probe = np.stack([p.xyz(np.linspace(0, 1, 17)) for p in self.pieces])   # (pieces, 17, 3)
+        ends = probe[:, [0, -1]].reshape(-1, 3)
         pairs = cKDTree(ends).query_pairs(eps, output_type="ndarray")
         n = len(ends)
         graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n)) if len(pairs) \
@@ -107,8 +120,7 @@ class Edges:
         self.corner = corner.reshape(-1, 2)                          # (pieces, 2) corner ids
         self.vertices = [ends[np.unique(corner, return_index=True)[1]]]
         self.nvert = len(self.vertices[0])
-        lengths = np.array([np.linalg.norm(np.diff(p.xyz(np.linspace(0, 1, 17)), axis=0), axis=1).sum()
-                            for p in self.pieces])
+        lengths = np.linalg.norm(np.diff(probe, axis=1), axis=2).sum(axis=1)
         self.degenerate = lengths < eps
         self.group = -np.ones(len(self.pieces), int)
         self.same_dir = np.ones(len(self.pieces), bool)
@@ -119,17 +131,16 @@ class Edges:
             self.group[i] = len(reps)
             reps.append(i)
             key = set(self.corner[i])
-            mid = None
             for j in range(i + 1, len(self.pieces)):
                 if self.group[j] >= 0 or self.degenerate[j] or set(self.corner[j]) != key:
                     continue
-                if mid is None:
-                    mid = p.xyz(np.array([0.25, 0.5, 0.75]))
-                q = self.pieces[j].xyz(np.array([0.25, 0.5, 0.75]))
-                sq, dq = _invert(p, q)
-                if dq.max() < eps:
+                same = _parallel(probe[i], probe[j], eps)   # same parameterisation, either way round
+                if same is None:
+                    sq, dq = _invert(p, probe[j, 4:13:4])
+                    same = sq[2] > sq[0] if dq.max() < eps else None
+                if same is not None:
                     self.group[j] = self.group[i]
-                    self.same_dir[j] = sq[2] > sq[0]
+                    self.same_dir[j] = same
         self.reps = reps
         self.version = np.zeros(len(reps), int)
         self.rep_s = [_sample_piece(self.pieces[r], tol) for r in reps]
@@ -151,8 +162,11 @@ class Edges:
                 if j == r:
                     self.member_s[j] = s
                     continue
-                pts = self.pieces[r].xyz(s)
-                sj, _ = _invert(self.pieces[j], pts)
+                pts = np.concatenate([self.vertices[0][ids[:1]], inner, self.vertices[0][ids[-1:]]])
+                sj = s if self.same_dir[j] else 1.0 - s
+                if np.abs(self.pieces[j].xyz(sj) - pts).max() >= self.eps:   # not the same parameterisation
+                    sj, _ = _invert(self.pieces[j], pts)
+                sj = sj.copy()
                 sj[[0, -1]] = (0.0, 1.0) if self.same_dir[j] else (1.0, 0.0)
                 self.member_s[j] = sj
 
