@@ -76,16 +76,19 @@ def occ_mesh(obj, tol):
 
 
 def equal_deviation(obj, target):
-    """rgm's mesh whose measured deviation is as close to `target` as possible without exceeding it: rgm
-    asked for `target`, then once more for target scaled by target / measured (a secant step on the
-    measured deviation), keeping the coarser mesh that stays within `target`."""
+    """rgm's coarsest mesh whose measured deviation does not exceed `target`: rgm asked for `target`, then
+    for target x r^(k/3), k = 1..4, with r = target / measured (the secant step on the measured deviation
+    is k = 3); of those whose measured deviation stays within `target`, the one with fewest triangles."""
     mesh = tessellate_mesh(obj, target)
     measured = deviation(obj, mesh.vertices, mesh.triangles)
+    best = mesh
     if 0 < measured < target:
-        again = tessellate_mesh(obj, target * target / measured)
-        if deviation(obj, again.vertices, again.triangles) <= target:
-            return again
-    return mesh
+        for k in range(1, 5):
+            again = tessellate_mesh(obj, target * (target / measured) ** (k / 3))
+            if len(again.triangles) < len(best.triangles) and \
+                    deviation(obj, again.vertices, again.triangles) <= target:
+                best = again
+    return best
 
 
 def best_of(runs, fn):
@@ -100,7 +103,8 @@ def best_of(runs, fn):
 
 def main():
     try:
-        import OCP  # noqa: F401  (only: is it installed?)
+        import OCP
+        del OCP   # only: is it installed?
         have_occ = True
     except ImportError:
         have_occ = False
