@@ -299,8 +299,39 @@ def _pcurve_pieces(loop, surface, tol):
         if ta > tb:
             best = best.Reversed()
             ta, tb = best.ReversedParameter(ta), best.ReversedParameter(tb)
+        # the neighbours end where this piece's approximation starts and ends (they met it within the
+        # tolerance, but a wire closes at PRECISION): their last / first point moved onto it
+        if k == 0:
+            pieces[-1] = (*_moved_end(pieces[-1][:3], best.Value(ta), True), None)
+        else:
+            out[-1] = _moved_end(out[-1], best.Value(ta), True)
+        if k + 1 < len(pieces):
+            pieces[k + 1] = (*_moved_end(pieces[k + 1][:3], best.Value(tb), False), None)
+        else:
+            out[0] = _moved_end(out[0], best.Value(tb), False)
         out.append((Geom2d_TrimmedCurve(best, ta, tb), ta, tb))
     return out
+
+
+def _moved_end(piece, point, at_end: bool):
+    """A pcurve piece (Geom2d_Curve, t0, t1) with its end (`at_end`) or start moved to the 2-D point:
+    a B-spline's end pole, or a segment rebuilt; other curves are kept (their ends are exact)."""
+    from OCP.Geom2d import Geom2d_BSplineCurve
+    from OCP.GCE2d import GCE2d_MakeSegment
+
+    c, t0, t1 = piece
+    here = c.Value(t1 if at_end else t0)
+    if here.Distance(point) == 0.0:
+        return piece
+    if isinstance(c, Geom2d_BSplineCurve) and (t1 if at_end else t0) == (c.LastParameter() if at_end else c.FirstParameter()):
+        c = c.Copy()
+        c.SetPole(c.NbPoles() if at_end else 1, point)
+        return c, t0, t1
+    if type(c).__name__ == "Geom2d_TrimmedCurve" and type(c.BasisCurve()).__name__ == "Geom2d_Line":
+        a, b = (c.Value(t0), point) if at_end else (point, c.Value(t1))
+        seg = GCE2d_MakeSegment(a, b).Value()
+        return seg, seg.FirstParameter(), seg.LastParameter()
+    return piece
 
 
 def _face_from_loops(face, tol):

@@ -8,7 +8,8 @@ Codes:
     W0505  a loop piece runs backwards (its end meets the next piece's end); back ends reverse it
     E0506  a parameter-space loop piece leaves the surface's domain
     E0507  a 3-D loop piece does not lie on the trimmed surface (farther than the tolerance)
-    E0508  an intersection used as a loop piece has no branch or several (a piece needs one)
+    E0508  an intersection used as a loop piece has no branch, or several where nothing picks one (a
+           piece between two curves is the stretch of the branch nearest their ends, as back ends take it)
     E0509  an intersection used as a loop piece is not an intersection *of* the trimmed surface
 
 Lazy pieces (`intersect(...)`) are not computed by `validate`: `rgmc check` and `rgm.load` never
@@ -40,7 +41,10 @@ def validate(model: O.Model) -> list[Diagnostic]:
 def validate_lazy(model: O.Model, tol: float | None = None) -> list[Diagnostic]:
     """Closure of the loops that contain intersections, approximated at `tol` (default: the model
     tolerance); the gap allowed is the model tolerance plus `tol`. Intersection pieces may run
-    either way (a marched branch has no preferred direction)."""
+    either way (a marched branch has no preferred direction). An intersection piece between two curves
+    is the stretch of its branch between the previous piece's end and the next one's start (the points
+    of the branch nearest them), as the back ends and `rgm.fitters.freeform_measure` take it: the loop
+    closes when those ends lie on the branch."""
     tol = model.tolerance if tol is None else float(tol)
     out: list[Diagnostic] = []
     faces = _faces(model)
@@ -67,30 +71,64 @@ def _faces(model: O.Model) -> list:
 
 
 def _lazy_loop(face, lp, tol: float, gap_tol: float, out: list) -> None:
+    pieces = lp.pieces
+    lazy = [isinstance(p, IntersectionCurve) for p in pieces]
     ends, free = [], []
-    for i, piece in enumerate(lp.pieces):
-        if isinstance(piece, IntersectionCurve):
-            if face.surface is not piece.a and face.surface is not piece.b:
-                out.append(error("E0509", f"loop piece {i + 1} is an intersection of other surfaces, not of the "
-                                          "trimmed one", _span(piece, lp), "not on this face"))
-                return
-            try:
-                branches = piece.approximate(tol)
-            except GeometryError as exc:
-                out.append(error("E0508", f"loop piece {i + 1}: {exc}", _span(piece, lp), "cannot be approximated"))
-                return
-            if len(branches) != 1:
-                out.append(error("E0508", f"loop piece {i + 1} is an intersection with {len(branches)} branches; "
-                                          "a loop piece needs exactly one", _span(piece, lp),
-                                 f"{len(branches)} branches"))
-                return
-            c = branches[0].curve
-            ends.append(tuple(c.evaluate(np.array(c.domain))))
-            free.append(True)
-        else:
+    for i, piece in enumerate(pieces):
+        if not lazy[i]:
             ends.append(_ends3(face.surface, piece))
             free.append(False)
+            continue
+        if face.surface is not piece.a and face.surface is not piece.b:
+            out.append(error("E0509", f"loop piece {i + 1} is an intersection of other surfaces, not of the "
+                                      "trimmed one", _span(piece, lp), "not on this face"))
+            return
+        try:
+            branches = piece.approximate(tol)
+        except GeometryError as exc:
+            out.append(error("E0508", f"loop piece {i + 1}: {exc}", _span(piece, lp), "cannot be approximated"))
+            return
+        k = len(pieces)
+        between = k > 1 and not lazy[i - 1] and not lazy[(i + 1) % k]
+        if between and branches:
+            # between two curves the piece is the stretch of the branch from the previous piece's end to
+            # the next one's start, as the back ends take it (of the branch passing nearest to both)
+            ends.append(_stretch(branches, _ends3(face.surface, pieces[i - 1])[1],
+                                 _ends3(face.surface, pieces[(i + 1) % k])[0]))
+            free.append(True)
+            continue
+        if len(branches) != 1:
+            out.append(error("E0508", f"loop piece {i + 1} is an intersection with {len(branches)} branches; "
+                                      "a loop piece needs exactly one", _span(piece, lp),
+                             f"{len(branches)} branches"))
+            return
+        c = branches[0].curve
+        ends.append(tuple(c.evaluate(np.array(c.domain))))
+        free.append(True)
     _chain(face, lp, ends, free, gap_tol, out)
+
+
+def _stretch(branches, start, end) -> tuple:
+    """The points of the branch passing nearest to `start` and `end` (3-D) nearest to each (dense
+    samples, each refined on the polyline's segments beside it)."""
+    best = None
+    for br in branches:
+        pts = br.curve.evaluate(np.linspace(*br.curve.domain, 4097))
+        near = [_nearest_on_polyline(pts, q) for q in (start, end)]
+        err = sum(np.linalg.norm(p - q) for p, q in zip(near, (start, end)))
+        if best is None or err < best[0]:
+            best = (err, tuple(near))
+    return best[1]
+
+
+def _nearest_on_polyline(pts, q) -> np.ndarray:
+    k = int(np.argmin(np.linalg.norm(pts - q, axis=1)))
+    cands = [pts[k]]
+    for a, b in ((pts[max(k - 1, 0)], pts[k]), (pts[k], pts[min(k + 1, len(pts) - 1)])):
+        ab = b - a
+        if ab @ ab > 0:
+            cands.append(a + np.clip((q - a) @ ab / (ab @ ab), 0, 1) * ab)
+    return min(cands, key=lambda p: np.linalg.norm(p - q))
 
 
 def _chain(face, lp, ends, free, tol, out) -> None:
