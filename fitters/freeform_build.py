@@ -8,7 +8,10 @@
   cuts (`fit_freeform`).
 - Other data (merged views, meshes) are scattered: `rgm.fitters.patches.fit_patches` splits them at
   creases, parameterises each patch by projection onto a base surface (plane or cylinder) and fits a
-  trimmed NURBS to it; the G0 gaps between neighbouring patches are measured and reported.
+  trimmed NURBS to it; neighbouring patches share their boundary where their surfaces cross (one
+  `intersect(surface_i, surface_j)` in both loops, `rgm.fitters.shared_edges`), and the G0 gap between
+  every pair of neighbours is measured and reported (on the shared edge, or between the separate trims
+  with the reason nothing is shared).
 
 Every patch's surface meets the tolerance's statistic, or says why it stopped short (`stopped`).
 Lengths are in model units (mm).
@@ -22,6 +25,7 @@ import numpy as np
 
 from rgm.errors import GeometryError
 from rgm.fitters.freeform_part import PlanarCut, fit_freeform, split_patches
+from rgm.fitters.shared_edges import SharedEdge
 
 __all__ = ["FreeformPart", "fit_freeform_part", "patch_part"]
 
@@ -43,7 +47,8 @@ def _describe(shape, parameterisation: str, points: int, seconds: float) -> dict
             "refinement": [[int(n), float(v)] for n, v in f.history], "stopped": f.stopped,
             "residual": {"statistic": f.stats.statistic, "value": f.stats.value, "max": f.stats.max},
             "loops": {"outer_pieces": len(shape.outer), "holes": len(shape.holes),
-                      "cuts": sum(isinstance(p, PlanarCut) for p in shape.outer)},
+                      "cuts": sum(isinstance(p, PlanarCut) for p in shape.outer),
+                      "shared_edges": sum(isinstance(p, SharedEdge) for p in shape.outer)},
             "seconds": float(seconds)}
 
 
@@ -94,8 +99,15 @@ def patch_part(result) -> FreeformPart:
     for p in result.patches:
         out.shapes.append(p.shape)
         out.info.append(_describe(p.shape, f"projection onto a {p.base.kind}", len(p.indices), p.seconds))
-    out.notes += [f"patches {g.i + 1} | {g.j + 1}: G0 gap max {g.max:.4f} mm, p95 {g.p95:.4f} mm "
-                  f"({g.samples} boundary samples)" for g in result.gaps]
+    for g in result.gaps:
+        if g.shared:
+            out.notes.append(f"patches {g.i + 1} | {g.j + 1}: one shared edge, the intersection of their surfaces "
+                             f"({g.length:.1f} mm): G0 gap on it max {g.max:.2g} mm, p95 {g.p95:.2g} mm ({g.samples} "
+                             f"samples of both faces' edges as approximated at the tolerance); separate trims "
+                             f"were {g.before:.4f} mm apart")
+        else:
+            out.notes.append(f"patches {g.i + 1} | {g.j + 1}: G0 gap max {g.max:.4f} mm, p95 {g.p95:.4f} mm "
+                             f"({g.samples} boundary samples; separate trims: {g.why or 'not shared'})")
     if result.unassigned:
         out.notes.append(f"{result.unassigned} points belong to no patch")
     return out

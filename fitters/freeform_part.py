@@ -20,7 +20,7 @@ from rgm.fitters.freeform import SurfaceFit, design_matrix, grid_parameters, pla
 from rgm.fitters.freeform_surface import fit_surface
 from rgm.fitters.trimloops import TrimLoops, fit_trim_loops
 
-__all__ = ["FreeformShape", "fit_freeform", "emit_freeform"]
+__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set"]
 
 _DEC = 4   # decimals of model-space numbers (mm): 0.1 micrometre
 _UV_DEC = 9
@@ -324,16 +324,11 @@ def _cut(piece: PlanarCut, surf: str, surface, tolerance: float, ends):
     return text, IntersectionCurve(surface, Plane(o, n), tolerance)
 
 
-def emit_freeform(shape: FreeformShape, name: str, suffix: str = "", *, tolerance: float):
-    """The `.rgm` bindings of a free-form part: `surface`, its `boundary` and `hole` loops and the trimmed
-    face `name`. `tolerance` (model units) is the file's (`tolerance` statement: the default accuracy of
-    its intersections). Returns an `rgm.fitters.emit.EmittedPart` whose `ideal` is the trimmed face
-    rebuilt from the printed numbers (`rgm.fitters.freeform_measure.TrimmedNurbs`, as `rgmc verify`
-    compiles it), so the certificate measures exactly the model the file describes."""
-    from rgm.fitters.emit import EmittedPart
-    from rgm.fitters.freeform_measure import TrimmedNurbs
+def _surface_binding(shape: FreeformShape, suffix: str):
+    """The `bsurface(...)` binding text of a patch's surface `surface{suffix}` and the model surface it
+    reads back as (printed numbers)."""
     from rgm.geometry import NurbsSurface
-    from rgm.model import BSplineSurface, Loop, TrimmedFace
+    from rgm.model import BSplineSurface
 
     f = shape.fit
     (ku_text, ku), (kv_text, kv) = _knots(f.knots_u), _knots(f.knots_v)
@@ -344,14 +339,41 @@ def emit_freeform(shape: FreeformShape, name: str, suffix: str = "", *, toleranc
     rows = (",\n" + indent).join(", ".join(entries[i * nv:(i + 1) * nv]) for i in range(nu))
     surf = f"surface{suffix}"
     surface = BSplineSurface(NurbsSurface(f.degree_u, f.degree_v, ku, kv, ctrl, None))
-    bindings = [f"{surf} := bsurface(degree_u: {f.degree_u}, degree_v: {f.degree_v},\n"
-                f"    knots_u: {ku_text},\n    knots_v: {kv_text},\n"
-                f"    net: net {nu} x {nv} [\n{indent}{rows}]);"]
-    outer = [None if isinstance(p, PlanarCut) else _curve2(p) for p in shape.outer]
+    text = (f"{surf} := bsurface(degree_u: {f.degree_u}, degree_v: {f.degree_v},\n"
+            f"    knots_u: {ku_text},\n    knots_v: {kv_text},\n"
+            f"    net: net {nu} x {nv} [\n{indent}{rows}]);")
+    return text, surface
+
+
+def emit_freeform(shape: FreeformShape, name: str, suffix: str = "", *, tolerance: float, shared=None):
+    """The `.rgm` bindings of a free-form part: `surface`, its `boundary` and `hole` loops and the trimmed
+    face `name`. `tolerance` (model units) is the file's (`tolerance` statement: the default accuracy of
+    its intersections). Returns an `rgm.fitters.emit.EmittedPart` whose `ideal` is the trimmed face
+    rebuilt from the printed numbers (`rgm.fitters.freeform_measure.TrimmedNurbs`, as `rgmc verify`
+    compiles it), so the certificate measures exactly the model the file describes.
+
+    A shape whose loop shares edges with its neighbours (`rgm.fitters.shared_edges.SharedEdge` pieces)
+    is emitted with the others of its set: `emit_freeform_set`, which passes `shared`."""
+    from rgm.fitters.emit import EmittedPart
+    from rgm.fitters.freeform_measure import TrimmedNurbs
+    from rgm.fitters.shared_edges import SharedEdge
+    from rgm.model import Loop, TrimmedFace
+
+    surf = f"surface{suffix}"
+    if shared is None:
+        if any(isinstance(p, SharedEdge) for p in shape.outer):
+            raise ValueError("a patch with shared edges is emitted with its neighbours: emit_freeform_set")
+        text, surface = _surface_binding(shape, suffix)
+        bindings = [text]
+    else:   # the set's printed surface and its shared intersections (name, model curve) by pair
+        surface, edges, bindings = shared["surface"], shared["edges"], list(shared["bindings"])
+    outer = [None if isinstance(p, (PlanarCut, SharedEdge)) else _curve2(p) for p in shape.outer]
     for k, p in enumerate(shape.outer):
         if isinstance(p, PlanarCut):
             ends = (outer[k - 1][1].nurbs().ctrl[-1], outer[(k + 1) % len(outer)][1].nurbs().ctrl[0])
             outer[k] = _cut(p, surf, surface, tolerance, ends)
+        elif isinstance(p, SharedEdge):
+            outer[k] = edges[p.pair]
     bindings.append(f"boundary{suffix} := loop(\n    " + ",\n    ".join(t for t, _ in outer) + ");")
     holes, hole_loops = [], []
     for k, hole in enumerate(shape.holes, 1):
@@ -362,3 +384,26 @@ def emit_freeform(shape: FreeformShape, name: str, suffix: str = "", *, toleranc
     bindings.append(f"{name} := trim({surf}, outer: boundary{suffix}, holes: [{', '.join(holes)}]);")
     face = TrimmedFace(surface, Loop(tuple(c for _, c in outer)), tuple(hole_loops))
     return EmittedPart(name, [], bindings, surf, TrimmedNurbs.from_model(face))
+
+
+def emit_freeform_set(shapes, names, suffixes, *, tolerance: float) -> list:
+    """The EmittedParts of a set of patches (`emit_freeform` each) whose loops may share edges
+    (`rgm.fitters.shared_edges.SharedEdge`, indices into `shapes`): each shared edge is one binding
+    `crease{suffix_i}{suffix_j} := intersect(surface{suffix_i}, surface{suffix_j});` (written with patch i)
+    used by both faces' loops, and one model IntersectionCurve of both printed surfaces, so the ideals
+    (and their certificates) see the same curve the file describes."""
+    from rgm.fitters.shared_edges import SharedEdge, snap_joins
+    from rgm.model import IntersectionCurve
+
+    printed = [_surface_binding(s, suffix) for s, suffix in zip(shapes, suffixes)]
+    pairs = sorted({p.pair for s in shapes for p in s.outer if isinstance(p, SharedEdge)})
+    if pairs:   # the corners exactly on the printed surfaces' intersections
+        shapes = snap_joins(shapes, [surface.nurbs() for _, surface in printed])
+    edges, texts = {}, {k: [] for k in range(len(shapes))}
+    for i, j in pairs:
+        crease = f"crease{suffixes[i]}{suffixes[j]}"
+        texts[i].append(f"{crease} := intersect(surface{suffixes[i]}, surface{suffixes[j]});")
+        edges[(i, j)] = (crease, IntersectionCurve(printed[i][1], printed[j][1], tolerance, name=crease))
+    return [emit_freeform(s, name, suffix, tolerance=tolerance,
+                          shared={"surface": printed[k][1], "edges": edges, "bindings": [printed[k][0]] + texts[k]})
+            for k, (s, name, suffix) in enumerate(zip(shapes, names, suffixes))]

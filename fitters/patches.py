@@ -21,11 +21,20 @@ merged views of a closed or wrapped part:
    axis), or failing that across its longest extent. Both parameters are scaled to [0, 1]².
 3. Each patch is fitted by `fit_freeform` with those parameters (least squares, knot insertion to the
    tolerance, trimming loops from the occupied cells of (u, v)).
-4. The G0 gap between neighbouring patches is measured, not assumed: points sampled along one patch's
-   trimming loop near the other patch are projected onto the other patch's surface (closest points).
-   Each patch has its own trim from its own data, so the gap is of the order of the trimming loop's
-   distance from the data edge (a few point spacings): reported, not closed. Sharing one boundary curve
-   (the neighbours' intersection) between patches is not done here.
+4. Neighbouring patches share their boundary curve (`rgm.fitters.shared_edges`): the piece of each face's
+   trimming loop along the crease with a neighbour becomes the same described intersection,
+   `intersect(surface_i, surface_j)`, one binding used by both loops, joined to the rest of each loop
+   (from its data, re-fitted from join to join) at two points on both surfaces. The least-squares surfaces
+   reach a little past their data, so near a crease they usually cross. G0 then holds by construction to
+   the intersection's approximation; it is measured, not assumed: along the shared edge as the back ends
+   take it (each face's stretch of the branch approximated at the model tolerance, on its own surface,
+   against the other face's). Where nothing is shared (surfaces meeting nearly tangentially, such as the
+   two halves of a wrap; surfaces that do not reach past the crease; seams of a few samples; a rebuilt
+   loop that would not be valid) the faces keep their own trims and the gap is measured as before:
+   points sampled along one patch's trimming loop near the other patch projected onto the other patch's
+   surface (closest points), of the order of the trim's distance from the data edge (a few point
+   spacings), reported with the reason. The corners between two shared edges (a short data piece) are
+   not shared.
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
@@ -243,14 +252,21 @@ class PatchFit:
 
 @dataclass
 class Gap:
-    """The measured G0 gap between patches i and j (model units): max and 95th percentile of the
-    distances of boundary samples of each patch (near the other) to the other patch's surface."""
+    """The measured G0 gap between patches i and j (model units): max and 95th percentile of `samples`
+    distances. `shared`: the faces share their boundary there, one `intersect(surface_i, surface_j)` in
+    both loops (`rgm.fitters.shared_edges`), and the figures are measured along it as the back ends see it
+    (`length` mm long; `before`: the max with separate trims). Otherwise the distances of boundary samples
+    of each patch (near the other) to the other patch's surface, and `why` says why nothing is shared."""
 
     i: int
     j: int
     max: float
     p95: float
     samples: int
+    shared: bool = False
+    length: float = 0.0
+    before: float | None = None
+    why: str = ""
 
 
 @dataclass
@@ -273,9 +289,10 @@ class PatchSet:
 
 
 def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, angle_deg: float = 35.0,
-                k: int = 16, max_ctrl: int = 4000) -> PatchSet:
+                k: int = 16, max_ctrl: int = 4000, share: bool = True) -> PatchSet:
     """Split scattered points (n, 3) at their creases and fit each patch with a trimmed NURBS surface
-    whose `statistic` of the residuals is within `tol` (model units); measure the G0 gaps."""
+    whose `statistic` of the residuals is within `tol` (model units); with `share`, neighbouring patches
+    share their boundary (the intersection of their surfaces) where they can; measure the G0 gaps."""
     points = _points(points)
     tree = cKDTree(points)
     spacing = _spacing(tree)
@@ -300,7 +317,12 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
             patches.append(PatchFit(group[sub], base, shape, time.perf_counter() - t0))
     patches.sort(key=lambda p: -len(p.indices))
     assigned = sum(len(p.indices) for p in patches)
-    return PatchSet(patches, g0_gaps(points, patches, 5 * spacing), len(points) - assigned, skipped)
+    gaps = g0_gaps(points, patches, 5 * spacing)
+    if share:
+        from rgm.fitters.shared_edges import share_boundaries
+
+        gaps = share_boundaries(points, patches, gaps, tol, 5 * spacing, spacing)
+    return PatchSet(patches, gaps, len(points) - assigned, skipped)
 
 
 def boundary_samples(shape: FreeformShape, per_piece: int = 60) -> np.ndarray:

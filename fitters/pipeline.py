@@ -144,12 +144,13 @@ def _snap(shape, part, name, suffix, pts, tol, statistic):
 def _freeform_parts(points, idx, grid, name, suffix, tol, statistic):
     """Emitted trimmed-NURBS patches of one part, their report entries and notes."""
     from rgm.fitters.freeform_build import fit_freeform_part
-    from rgm.fitters.freeform_part import emit_freeform
+    from rgm.fitters.freeform_part import emit_freeform_set
 
     ff = fit_freeform_part(points, idx, tol, statistic=statistic, grid=grid, min_pixels=SPECK_PIXELS)
     single = len(ff.shapes) == 1
-    parts = [emit_freeform(shape, name if single else f"{name}_{r}", suffix if single else f"{suffix}_{r}",
-                           tolerance=tol) for r, shape in enumerate(ff.shapes, 1)]
+    count = range(1, len(ff.shapes) + 1)
+    parts = emit_freeform_set(ff.shapes, [name if single else f"{name}_{r}" for r in count],
+                              [suffix if single else f"{suffix}_{r}" for r in count], tolerance=tol)
     for part, info in zip(parts, ff.info):
         info["name"] = part.name
     return parts, ff.info, [f"{name}: {n}" for n in ff.notes]

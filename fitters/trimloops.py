@@ -106,20 +106,35 @@ def _densify(poly: np.ndarray, per_edge: int = 4) -> np.ndarray:
     return np.vstack([pts, poly[-1:]])
 
 
+def _fit_segments(poly: np.ndarray, cuts, tol_uv: float, degree: int) -> tuple[CurveFit, ...]:
+    """B-spline pieces through the stretches poly[a:b + 1] of an open polyline between consecutive `cuts`
+    (vertex indices), each refined by knot insertion to `tol_uv` with its ends fixed on the vertices."""
+    pieces = []
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        seg = poly[a:b + 1]
+        pieces.append(fit_curve(_densify(seg), tol_uv, degree=min(degree, len(seg) - 1), fix_ends=True))
+    return tuple(pieces)
+
+
 def fit_closed_loop(uv: np.ndarray, tol_uv: float, degree: int = 3) -> tuple[CurveFit, ...]:
     """Closed polygon (k, 2) -> consecutive B-spline pieces, split at corners (C0 there, smooth between),
     each refined by knot insertion to `tol_uv`; the pieces share their end points, so the loop closes."""
     corners = corner_indices(uv)
     if len(corners) == 0:
         return (fit_curve(_densify(np.vstack([uv, uv[:1]])), tol_uv, degree=degree, fix_ends=True),)
-    rolled = np.roll(uv, -corners[0], axis=0)
-    cuts = np.r_[corners - corners[0], len(uv)]
-    pieces = []
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        seg = rolled[a:b + 1] if b < len(uv) else np.vstack([rolled[a:], rolled[:1]])
-        deg = min(degree, len(seg) - 1)
-        pieces.append(fit_curve(_densify(seg), tol_uv, degree=deg, fix_ends=True))
-    return tuple(pieces)
+    rolled = np.vstack([np.roll(uv, -corners[0], axis=0), uv[corners[0]]])
+    return _fit_segments(rolled, np.r_[corners - corners[0], len(uv)], tol_uv, degree)
+
+
+def fit_open_chain(uv: np.ndarray, tol_uv: float, degree: int = 3) -> tuple[CurveFit, ...]:
+    """Open polyline (k, 2), k >= 2 -> consecutive B-spline pieces from its first vertex to its last
+    (which they keep exactly: the chain joins what lies beyond its ends), split at its corners as a
+    closed loop is (`corner_indices`, judged away from the ends) and each refined to `tol_uv`."""
+    uv = np.asarray(uv, float)
+    w = 3
+    inner = corner_indices(uv, window=w) if len(uv) >= 2 * w + 2 else np.zeros(0, int)
+    inner = inner[(inner >= w) & (inner <= len(uv) - 1 - w)]   # a closed polygon's wrap-around is no corner
+    return _fit_segments(uv, np.r_[0, inner, len(uv) - 1], tol_uv, degree)
 
 
 def loop_stats_max(loop: tuple[CurveFit, ...]) -> float:

@@ -1,6 +1,7 @@
 """Scattered free-form data split into patches at sharp edges (issue 8): creases found from normals,
-patches parameterised over a plane or a cylinder, each fitted as a trimmed NURBS to a tolerance, the
-G0 gaps between neighbours measured; a box, a capped cylinder, an open wrap, and the YCB mustard bottle."""
+patches parameterised over a plane or a cylinder, each fitted as a trimmed NURBS to a tolerance,
+neighbours sharing their boundary (the intersection of their surfaces) where they cross, the G0 gaps
+between neighbours measured; a box, a capped cylinder, an open wrap, and the YCB mustard bottle."""
 import sys
 import time
 from pathlib import Path
@@ -15,7 +16,7 @@ from rgm.errors import GeometryError
 from rgm.fitters.filters import statistical_outliers
 from rgm.fitters.emit import write_rgm
 from rgm.fitters.freeform_build import patch_part
-from rgm.fitters.freeform_part import emit_freeform
+from rgm.fitters.freeform_part import emit_freeform_set
 from rgm.fitters.patches import base_parameters, fit_patches, split_scattered
 from rgm.fitters.normals import pca_normals
 from rgm.model import TrimmedFace
@@ -30,7 +31,8 @@ def patches_text(result, tol, title="patches"):
     """The `.rgm` text of a PatchSet as `rgmc fit` writes free-form patches (patch_1, ...), the measured
     G0 gaps as header notes; and the emitted parts (their `ideal` rebuilt from the printed numbers)."""
     part = patch_part(result)
-    parts = [emit_freeform(shape, f"patch_{k}", f"_{k}", tolerance=tol) for k, shape in enumerate(part.shapes, 1)]
+    count = range(1, len(part.shapes) + 1)
+    parts = emit_freeform_set(part.shapes, [f"patch_{k}" for k in count], [f"_{k}" for k in count], tolerance=tol)
     return write_rgm(parts, inputs=[], options={}, tol=tol, notes=part.notes, title=title), parts
 
 
@@ -92,13 +94,15 @@ def test_box_patches_meet_the_tolerance_and_every_edge_has_a_measured_gap():
     # a box has 12 edges: each is a seam between two faces, and only those are neighbours
     assert len(result.gaps) == 12
     spacing = np.median(cKDTree(p).query(p, k=2)[0][:, 1])
-    gaps = np.array([g.max for g in result.gaps])
-    # honest figures: the gap is not zero (the trims come from sampled data), but the patches do meet
-    # within a few point spacings of the crease
-    assert np.all(gaps > 0) and gaps.max() < 10 * spacing
+    # every edge is one shared intersection: the gap measured along it (as the back ends approximate it,
+    # at the tolerance) is far below what the separate trims had (a few point spacings: measured too)
+    assert all(g.shared for g in result.gaps)
+    gaps, before = np.array([g.max for g in result.gaps]), np.array([g.before for g in result.gaps])
+    assert np.all(before > 0) and before.max() < 10 * spacing
+    assert gaps.max() <= 0.2 and gaps.max() < 0.01 * before.min()
     print(f"box: {len(result)} patches, ctrl {[s.fit.n_ctrl for s in result.shapes]}, "
-          f"p95 {[round(s.fit.stats.p95, 3) for s in result.shapes]}, G0 gap max {gaps.max():.2f} mm "
-          f"({gaps.max() / spacing:.1f} spacings), {seconds:.1f} s")
+          f"p95 {[round(s.fit.stats.p95, 3) for s in result.shapes]}, G0 gap max {gaps.max():.2g} mm on the "
+          f"shared edges (separate trims: {before.max():.2f} mm, {before.max() / spacing:.1f} spacings), {seconds:.1f} s")
 
 
 def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two():
@@ -110,21 +114,26 @@ def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two():
     result = fit_patches(p, 0.2)
     kinds = sorted(q.base.kind for q in result.patches)
     assert kinds == ["cylinder", "cylinder", "plane", "plane"]  # a full wrap has no gap: two halves
-    for q in result.patches:
+    text, parts = patches_text(result, 0.2)
+    for q, part in zip(result.patches, parts):
         s = q.shape
         assert s.fit.stats.holds
-        on = emit_freeform(s, "p", tolerance=0.2).ideal.sample_surface(2.0)
+        on = part.ideal.sample_surface(2.0)
         if q.base.kind == "cylinder":   # the fitted surface is the true cylinder within the tolerance
             err = np.abs(np.hypot(on[:, 0], on[:, 1]) - r)
         else:
             err = np.abs(np.abs(on[:, 2]) - h / 2)
         assert np.percentile(err, 95) < 0.2
     assert all(np.isfinite(g.max) and g.max > 0 for g in result.gaps)
-    text, _ = patches_text(result, 0.2)
+    # the rims are shared (cap plane and mantle cross there); the two halves of the wrap meet tangentially
+    # and keep their own trims, which the report says
+    assert [g.shared for g in result.gaps].count(True) >= 2
+    assert all(g.max <= 0.2 for g in result.gaps if g.shared)
+    assert any("tangentially" in g.why for g in result.gaps if not g.shared)
     model = rgm.loads(text)
     assert not [d for d in model.diagnostics if d.is_error]
     assert all(isinstance(model.objects[f"patch_{k}"], TrimmedFace) for k in range(1, 5))
-    assert text.count("G0 gap max") == len(result.gaps)
+    assert text.count("G0 gap") == len(result.gaps)
 
 
 def test_an_open_wrap_is_one_patch_parameterised_by_its_angle():
@@ -179,7 +188,20 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges():
     assert np.percentile(parts[0].ideal.distance(p[result.patches[0].indices[::10]]), 95) <= 1.0
     gaps = np.array([g.max for g in result.gaps])
     assert len(gaps) >= len(result) - 1 and np.all(np.isfinite(gaps))
+    # the cap and shoulder creases are shared where the surfaces cross: within the tolerance along the
+    # edge, several times closer than the separate trims were; every pair not shared says why
+    shared = [g for g in result.gaps if g.shared]
+    assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
+    assert max(g.max for g in shared) < 0.5 * min(g.before for g in shared)
+    assert all(g.why for g in result.gaps if not g.shared)
+    for g in shared:   # one binding, used by both faces' loops
+        crease = f"crease_{g.i + 1}_{g.j + 1}"
+        assert text.count(f"{crease} := intersect(surface_{g.i + 1}, surface_{g.j + 1});") == 1
+        assert text.count(f"    {crease},") + text.count(f"    {crease});") == 2
+    apart = [g for g in result.gaps if not g.shared]
     print(f"mustard: {len(p)} points, {len(result)} patches, ctrl {[s.fit.n_ctrl for s in result.shapes]}, "
           f"p95 {[round(s.fit.stats.p95, 2) for s in result.shapes]}, "
-          f"max {[round(s.fit.stats.max, 2) for s in result.shapes]}, G0 gap max {gaps.max():.2f} mm, "
-          f"median {np.median(gaps):.2f} mm, {seconds:.1f} s")
+          f"max {[round(s.fit.stats.max, 2) for s in result.shapes]}; {len(shared)} of {len(gaps)} seams shared, "
+          f"G0 gap on them max {max(g.max for g in shared):.3f} mm (separate trims "
+          f"{[round(g.before, 2) for g in shared]} mm); the others max {max(g.max for g in apart):.2f} mm, "
+          f"median {np.median([g.max for g in apart]):.2f} mm, {seconds:.1f} s")

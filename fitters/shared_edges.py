@@ -1,0 +1,449 @@
+"""Neighbouring free-form patches share their boundary curve: the described intersection of their surfaces.
+
+`rgm.fitters.patches` fits each patch between creases as a trimmed NURBS whose trim comes from its own
+data; two such trims miss each other by a few point spacings. Here the piece of each face's loop that
+runs along the crease with a neighbour becomes the *same* described curve, `intersect(surface_i,
+surface_j)`, in both faces' loops (the paper keeps intersections as descriptions, approximated by each back
+end at its own accuracy), so the faces meet along it by construction: G0 to the accuracy of the
+intersection's approximation, which is then measured, not assumed.
+
+For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_gaps`):
+
+1. The seam on each face: the longest run of samples of its outer loop whose nearest point outside the
+   patch belongs to the neighbour (within `near`; gaps of a few samples with no neighbour closed).
+2. The surfaces are intersected (`rgm.geometry.intersect.intersect_surfaces`, at the model tolerance, as
+   the IntersectionCurve the file describes approximates it). The least-squares surfaces extend over their whole parameter square, a little past their
+   data, so near a crease they usually cross. The branch that both seams follow is taken (most run samples
+   within `near`, their order along the run matching the branch's); its stretch under the seams, the
+   mean of the two faces' ends, is the shared edge, its ends the joins: one 3-D point each, seen on both
+   surfaces at the same branch parameter. Pairs whose surfaces meet nearly tangentially (the two halves of
+   a wrap, a soft crease) are not intersected, nor pairs with no branch along the seam, a closed branch
+   (which arc a loop keeps would be ambiguous), or a stretch of less than a few spacings: they keep their
+   separate trims, and the reason is reported with the measured gap.
+3. Loops (`rebuild_loop`): the loop's run is replaced by a `SharedEdge` piece and the rest of the loop,
+   from the data as before, is re-fitted from join to join (`rgm.fitters.trimloops.fit_open_chain`: split
+   at corners, ends fixed on the joins) after dropping the data samples the shared edge covers. Two shared
+   edges are never adjacent (a data piece lies between; the back ends need one). A loop that is not simple,
+   not counter-clockwise, leaves the domain or changes the trimmed area by more than 20 % drops that face's
+   shared edges (and its neighbours' rebuild).
+4. Measurement (`measure_shared`): as the back ends see it, the model objects are built (the surfaces,
+   one `IntersectionCurve` of both at the model tolerance, the loops) and each face's piece is the
+   stretch of the approximated branch between its neighbouring pieces' ends
+   (`rgm.fitters.freeform_measure.branch_between`, as `TrimmedNurbs` takes it); the points of face i's
+   edge S_i(uv_i) are measured to face j's edge S_j(uv_j) (a dense polyline on surface j: never closer
+   than surface j itself), and the other way. A pair whose measured gap exceeds the tolerance keeps its separate trims.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rgm.errors import GeometryError
+
+__all__ = ["SharedEdge", "share_boundaries", "rebuild_loop", "measure_shared"]
+
+_BRANCH = 4001        # samples of a branch for matching runs and joins
+_TANGENT_DEG = 20.0   # surfaces meeting at less than this along a seam are not intersected
+_MIN_AREA_RATIO = 0.8
+
+
+@dataclass(frozen=True)
+class SharedEdge:
+    """A loop piece that is the intersection of this face's surface with neighbour `other`'s (indices into
+    the patch list); `pair` (i, j), i < j, names the one curve both faces' loops use."""
+
+    other: int
+    pair: tuple
+
+
+@dataclass
+class _Loop:
+    """Dense samples of a face's outer loop: uv (m, 2), xyz (m, 3) on its surface, the nearest other
+    patch of each sample (-1: none within `near`)."""
+
+    uv: np.ndarray
+    xyz: np.ndarray
+    owner: np.ndarray
+
+
+@dataclass
+class _Run:
+    """A seam run on one face: sample indices start..end (forward along the loop, cyclic, inclusive)."""
+
+    start: int
+    end: int
+    idx: np.ndarray      # the sample indices of the run, in loop order
+
+
+@dataclass
+class _Candidate:
+    """A pair's shared edge before the loops are rebuilt: the branch (dense samples), the stretch
+    lo..hi of branch sample indices, and each face's run and direction along the branch."""
+
+    i: int
+    j: int
+    xyz: np.ndarray        # (B, 3) branch samples
+    uv: dict               # face -> (B, 2) the branch in that face's parameters
+    lo: int
+    hi: int
+    runs: dict             # face -> _Run
+    rising: dict           # face -> bool: the run goes from lo to hi
+    branches: list         # all branches of surface i ∩ surface j at the model tolerance
+
+
+def _piece_points(piece, m):
+    from rgm.fitters.freeform import design_matrix
+
+    return design_matrix(np.linspace(0, 1, m), piece.knots, piece.degree) @ piece.ctrl
+
+
+def _loop_samples(shape, spacing: float) -> np.ndarray:
+    """A closed (u, v) polygon (m, 2) along the face's outer data loop (last point not repeated), its
+    samples about half a point spacing apart on the surface (at least 16 a piece)."""
+    s = shape.nurbs()
+    uv = []
+    for p in shape.outer:
+        probe = s.evaluate(*_piece_points(p, 64).T)
+        length = float(np.linalg.norm(np.diff(probe, axis=0), axis=1).sum())
+        uv.append(_piece_points(p, int(np.clip(2 * length / spacing, 16, 4000)))[:-1])
+    uv = np.vstack(uv)
+    keep = np.r_[True, np.linalg.norm(np.diff(uv, axis=0), axis=1) > 0]
+    return uv[keep]
+
+
+def _owners(points, label, i, xyz, near) -> np.ndarray:
+    others = np.nonzero((label >= 0) & (label != i))[0]
+    owner = np.full(len(xyz), -1)
+    if len(others):
+        d, j = cKDTree(points[others]).query(xyz, distance_upper_bound=near, workers=-1)
+        hit = np.isfinite(d)
+        owner[hit] = label[others[j[hit]]]
+    return owner
+
+
+def _longest_run(mask: np.ndarray, close: int = 3) -> _Run | None:
+    """The longest cyclic run of True in `mask` after closing gaps of at most `close` samples; a mask
+    True all round leaves its last few samples out (a loop needs a data piece)."""
+    m = len(mask)
+    mask = mask.copy()
+    if mask.all():
+        mask[-4:] = False
+    if not mask.any():
+        return None
+    shift = int(np.argmin(mask))          # rotate so that the array starts outside a run
+    r = np.roll(mask, -shift)
+    edges = np.diff(np.r_[0, r.astype(int), 0])
+    starts, ends = np.nonzero(edges == 1)[0], np.nonzero(edges == -1)[0] - 1
+    runs = [[a, b] for a, b in zip(starts, ends)]
+    merged = [runs[0]]
+    for a, b in runs[1:]:
+        if a - merged[-1][1] - 1 <= close:
+            merged[-1][1] = b
+        else:
+            merged.append([a, b])
+    a, b = max(merged, key=lambda ab: ab[1] - ab[0])
+    idx = (np.arange(a, b + 1) + shift) % m
+    return _Run(int(idx[0]), int(idx[-1]), idx)
+
+
+def _normals_angle(si, sj, uv_i, xyz) -> float:
+    """Median angle (degrees) between surface i's normals at uv_i and surface j's at its closest points
+    to xyz (unoriented)."""
+    from rgm.geometry.inversion import closest_point_surface
+
+    u, v = closest_point_surface(sj, xyz)[:2]
+    cos = np.abs(np.einsum("ij,ij->i", si.normal(uv_i[:, 0], uv_i[:, 1]), sj.normal(np.asarray(u), np.asarray(v))))
+    return float(np.degrees(np.arccos(np.clip(np.median(cos), 0, 1))))
+
+
+def _candidate(i, j, shapes, loops, tol, near, spacing):
+    """A _Candidate for the pair (i, j), or the reason (str) why its seam keeps separate trims."""
+    from rgm.geometry.intersect import intersect_surfaces
+
+    runs = {}
+    for a, b in ((i, j), (j, i)):
+        run = _longest_run(loops[a].owner == b)
+        if run is None or len(run.idx) < 6:
+            return "the seam is too short on one side to share"
+        runs[a] = run
+    si, sj = shapes[i].nurbs(), shapes[j].nurbs()
+    run_i = runs[i].idx[np.unique(np.linspace(0, len(runs[i].idx) - 1, 24).astype(int))]
+    angle = _normals_angle(si, sj, loops[i].uv[run_i], loops[i].xyz[run_i])
+    if angle < _TANGENT_DEG:
+        return f"the surfaces meet nearly tangentially along the seam ({angle:.0f} degrees apart)"
+    try:
+        branches = intersect_surfaces(si, sj, tol)
+    except GeometryError as exc:
+        return f"their intersection could not be approximated ({exc})"
+    best = None
+    for br in branches:
+        t = np.linspace(*br.curve.domain, _BRANCH)
+        xyz = br.curve.evaluate(t)
+        tree = cKDTree(xyz)
+        score, where = 0, {}
+        for a in (i, j):
+            d, k = tree.query(loops[a].xyz[runs[a].idx])
+            score += int(np.sum(d <= near))
+            where[a] = (d, k)
+        if best is None or score > best[0]:
+            best = (score, br, t, xyz, where)
+    if best is None:
+        return "their surfaces do not intersect (they do not reach past the crease)"
+    score, br, t, xyz, where = best
+    for a in (i, j):   # the stretch of each run that follows the branch (the surfaces may not reach further)
+        d, k = where[a]
+        sub = _longest_run(np.r_[d <= near, False], close=3)
+        if sub is None or len(sub.idx) < 6:
+            return "no branch of their intersection follows the seam (the surfaces do not reach past the crease there)"
+        keep = sub.idx
+        idx = runs[a].idx[keep]
+        runs[a] = _Run(int(idx[0]), int(idx[-1]), idx)
+        where[a] = (d[keep], k[keep])
+    if br.closed:
+        return "their intersection is a closed loop (which arc a face keeps would be ambiguous)"
+    ends, rising = {}, {}
+    for a in (i, j):
+        k = where[a][1].astype(float)
+        rho = np.corrcoef(np.arange(len(k)), k)[0, 1] if np.ptp(k) > 0 else 0.0
+        if not abs(rho) > 0.9:
+            return "the seam does not run along their intersection"
+        first, last = np.median(k[:3]), np.median(k[-3:])
+        ends[a], rising[a] = (min(first, last), max(first, last)), bool(last > first)
+    lo = int(round(0.5 * (ends[i][0] + ends[j][0])))
+    hi = int(round(0.5 * (ends[i][1] + ends[j][1])))
+    length = float(np.linalg.norm(np.diff(xyz[lo:hi + 1], axis=0), axis=1).sum()) if hi > lo else 0.0
+    if length < 4 * spacing:
+        return f"the shared stretch would be {length:.2f} mm long, under four point spacings"
+    uv = {i: br.uv_a.evaluate(t), j: br.uv_b.evaluate(t)}
+    return _Candidate(i, j, xyz, uv, lo, hi, runs, rising, branches)
+
+
+def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float):
+    """Face k's outer pieces with its runs (one per candidate, none overlapping) replaced by SharedEdge
+    pieces, the rest re-fitted from join to join; or the reason (str) why it cannot be."""
+    from rgm.fitters.trimloops import fit_open_chain, signed_area
+
+    m = len(loop.uv)
+    order = sorted(cands, key=lambda c: c.runs[k].start)
+    used = np.zeros(m, bool)
+    for c in order:
+        if used[c.runs[k].idx].any():
+            return "two seams overlap on its loop"
+        used[c.runs[k].idx] = True
+    pieces, poly = [], []
+    for n, c in enumerate(order):
+        other = c.j if c.i == k else c.i
+        run, nxt = c.runs[k], order[(n + 1) % len(order)]
+        ends = (c.lo, c.hi) if c.rising[k] else (c.hi, c.lo)
+        a, b = ends
+        arc = c.uv[k][a:b + 1] if a <= b else c.uv[k][b:a + 1][::-1]
+        pieces.append(SharedEdge(other, (c.i, c.j)))
+        poly.append(arc[np.unique(np.linspace(0, len(arc) - 1, min(len(arc), 120)).astype(int))][:-1])
+        # the data from this run's end to the next run's start, without the samples a shared edge covers
+        start = run.end + 1
+        stop = nxt.runs[k].start if len(order) > 1 else run.start
+        count = (stop - start) % m
+        rest = (start + np.arange(count)) % m
+        for cand, lead in ((c, True), (nxt, False)):
+            if len(rest) == 0:
+                break
+            d, idx = cKDTree(cand.xyz).query(loop.xyz[rest])
+            covered = (d <= reach) & (idx > cand.lo) & (idx < cand.hi)
+            if lead:
+                drop = int(np.argmin(covered)) if not covered.all() else len(rest)
+                rest = rest[drop:]
+            else:
+                drop = int(np.argmin(covered[::-1])) if not covered.all() else len(rest)
+                rest = rest[:len(rest) - drop]
+        n_ends = (nxt.hi, nxt.lo) if not nxt.rising[k] else (nxt.lo, nxt.hi)
+        chain = np.vstack([c.uv[k][b], loop.uv[rest], nxt.uv[k][n_ends[0]]])
+        chain = chain[np.r_[True, np.linalg.norm(np.diff(chain, axis=0), axis=1) > 1e-12]]
+        if len(chain) < 2:
+            return "two shared edges would meet with no data piece between"
+        try:
+            rest_pieces = fit_open_chain(chain, tol_uv)
+        except GeometryError as exc:
+            return f"the rest of its loop could not be fitted ({exc})"
+        rest_pieces = tuple(replace(p, ctrl=np.clip(p.ctrl, 0.0, 1.0)) for p in rest_pieces)
+        pieces += list(rest_pieces)
+        poly += [_piece_points(p, max(16, 6 * len(p.ctrl)))[1:-1] for p in rest_pieces]
+    polygon = np.vstack(poly)
+    if polygon.min() < 0 or polygon.max() > 1:
+        return "its new loop leaves the surface's domain"
+    old = signed_area(loop.uv)
+    new = signed_area(polygon)
+    if not (new > 0 and _MIN_AREA_RATIO <= new / old <= 1 / _MIN_AREA_RATIO):
+        return f"its new loop would change the trimmed area by a factor {new / old:.2f}"
+    if not _simple(polygon):
+        return "its new loop would cross itself"
+    return pieces
+
+
+def _simple(poly: np.ndarray) -> bool:
+    """Whether a closed polygon (k, 2) has no two non-adjacent edges that cross (chunked vector test)."""
+    a, b = poly, np.roll(poly, -1, axis=0)
+    k = len(poly)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+
+    def orient(p, q, r):
+        return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+
+    for s in range(0, k, 256):
+        e = np.arange(s, min(s + 256, k))
+        box = np.all((lo[e, None] <= hi[None]) & (lo[None] <= hi[e, None]), axis=2)
+        gap = np.abs(e[:, None] - np.arange(k)[None])
+        box &= (gap > 1) & (gap < k - 1)
+        ii, jj = np.nonzero(box)
+        if len(ii) == 0:
+            continue
+        p, q, r, t = a[e[ii]], b[e[ii]], a[jj], b[jj]
+        cross = (orient(p, q, r) * orient(p, q, t) < 0) & (orient(r, t, p) * orient(r, t, q) < 0)
+        if cross.any():
+            return False
+    return True
+
+
+def measure_shared(i, j, shape_i, shape_j, tol: float, branches=None) -> tuple[float, float, int, float]:
+    """(max, p95, samples, length) of the G0 gap along the shared edge of faces i and j as the back ends
+    see it: the model objects (surfaces, one IntersectionCurve at the model tolerance `tol`, each face's
+    loop) and each face's stretch of the approximated branch between its neighbouring pieces' ends.
+    `branches`: that approximation if already made (`intersect_surfaces(surface_i, surface_j, tol)`, what
+    the IntersectionCurve computes), not computed again."""
+    from rgm.fitters.freeform_measure import branch_between
+    from rgm.model import BSplineSurface, IntersectionCurve
+
+    sa, sb = BSplineSurface(shape_i.nurbs()), BSplineSurface(shape_j.nurbs())
+    curve = IntersectionCurve(sa, sb, tol)
+    if branches is not None:
+        curve._cache[float(tol)] = branches
+    edges = []
+    for shape, surface, other in ((shape_i, sa, j), (shape_j, sb, i)):
+        pieces = shape.outer
+        k = next(n for n, p in enumerate(pieces) if isinstance(p, SharedEdge) and p.other == other)
+        before, after = pieces[k - 1], pieces[(k + 1) % len(pieces)]
+        uv = branch_between(curve.uv_curves(surface), before.ctrl[-1], after.ctrl[0])
+        edges.append(surface.nurbs().evaluate(uv[:, 0], uv[:, 1]))
+    ea, eb = edges
+    d = np.concatenate([_to_polyline(ea, eb), _to_polyline(eb, ea)])   # not below either's distance to the
+    # other surface, on which the other edge lies
+    length = float(np.linalg.norm(np.diff(ea, axis=0), axis=1).sum())
+    return float(d.max()), float(np.percentile(d, 95)), len(d), length
+
+
+def _to_polyline(points, polyline) -> np.ndarray:
+    """Distances (k,) of points to a dense polyline: nearest vertex, then the two edges beside it."""
+    _, k = cKDTree(polyline).query(points)
+    best = np.full(len(points), np.inf)
+    for lo in (k - 1, k):
+        lo = np.clip(lo, 0, len(polyline) - 2)
+        a, b = polyline[lo], polyline[lo + 1]
+        ab = b - a
+        w = np.clip(np.einsum("ij,ij->i", points - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-300), 0, 1)
+        best = np.minimum(best, np.linalg.norm(points - (a + w[:, None] * ab), axis=1))
+    return best
+
+
+def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: float) -> list:
+    """Make neighbouring patches share their boundary: for each seam in `gaps` (separate-trim Gaps from
+    `g0_gaps`), the intersection of both surfaces in both loops where it can be (module docstring),
+    patches[k].shape replaced accordingly. Returns the Gaps: shared ones measured on the shared edge
+    (`before`: the separate trims' figure), the others as they were, with the reason."""
+    from rgm.fitters.freeform_part import FreeformShape, _surface_speed
+
+    label = np.full(len(points), -1)
+    for r, p in enumerate(patches):
+        label[p.indices] = r
+    loops = []
+    for r, p in enumerate(patches):
+        uv = _loop_samples(p.shape, spacing)
+        xyz = p.shape.nurbs().evaluate(uv[:, 0], uv[:, 1])
+        loops.append(_Loop(uv, xyz, _owners(points, label, r, xyz, near)))
+    shapes = [p.shape for p in patches]
+    why, cands = {}, {}
+    for g in gaps:
+        c = _candidate(g.i, g.j, shapes, loops, tol, near, spacing)
+        if isinstance(c, str):
+            why[(g.i, g.j)] = c
+        else:
+            cands[(g.i, g.j)] = c
+    reach = near + tol
+    measured = {}
+    while True:   # rebuild the loops, measure the edges; drop what fails and go again
+        new, failed = {}, {}
+        for k in sorted({f for pair in cands for f in pair}):
+            mine = [c for pair, c in cands.items() if k in pair]
+            out = rebuild_loop(k, shapes[k], loops[k], mine, tol / _surface_speed(shapes[k].fit), reach)
+            if isinstance(out, str):
+                failed[k] = out
+            else:
+                new[k] = FreeformShape(shapes[k].fit, shapes[k].loops, out, shapes[k].holes)
+        for k, reason in failed.items():
+            for pair in [p for p in cands if k in p]:
+                why[pair] = f"patch {k + 1}: {reason}"
+                del cands[pair]
+        if failed:
+            continue
+        bad = False
+        for (i, j) in list(cands):
+            if (i, j) not in measured:   # a pair's edge and joins do not depend on the other pairs
+                measured[(i, j)] = measure_shared(i, j, new[i], new[j], tol, cands[(i, j)].branches)
+            if measured[(i, j)][0] > tol:
+                why[(i, j)] = f"the shared edge was measured {measured[(i, j)][0]:.3g} mm apart, over the tolerance"
+                del cands[(i, j)]
+                bad = True
+        if not bad:
+            break
+    measured = {pair: v for pair, v in measured.items() if pair in cands}
+    for k, shape in new.items():
+        patches[k].shape = shape
+    out = []
+    for g in gaps:
+        pair = (g.i, g.j)
+        if pair in measured:
+            gmax, p95, n, length = measured[pair]
+            out.append(replace(g, max=gmax, p95=p95, samples=n, shared=True, length=length, before=g.max))
+        else:
+            out.append(replace(g, why=why.get(pair, "")))
+    return out
+
+
+def snap_joins(shapes, surfaces) -> list:
+    """The shapes with every join (the ends of the data pieces beside a SharedEdge) moved exactly onto
+    the intersection of the two *printed* surfaces `surfaces` (NurbsSurfaces, one a shape): each join of
+    a pair is one 3-D point, solved on both surfaces at once from the two faces' joins (minimum-norm
+    Newton on S_i(u, v) = S_j(s, t)), so each back end finds its approximation of the intersection passing
+    through the ends of both faces' neighbouring pieces to its own precision, and the faces' corners meet."""
+    from rgm.fitters.freeform_part import FreeformShape
+    from rgm.geometry.intersect import _newton_min_norm, _SurfaceProblem
+
+    def joins(k, pair):
+        pieces = shapes[k].outer
+        n = next(n for n, p in enumerate(pieces) if isinstance(p, SharedEdge) and p.pair == pair)
+        return [(n - 1) % len(pieces), (n + 1) % len(pieces)]
+
+    outer = [list(s.outer) for s in shapes]
+    pairs = sorted({p.pair for s in shapes for p in s.outer if isinstance(p, SharedEdge)})
+    for i, j in pairs:
+        si, sj = surfaces[i], surfaces[j]
+        ends_i, ends_j = joins(i, (i, j)), joins(j, (i, j))
+        # face i's pieces before / after the edge end / start at its two joins; match face j's by 3-D point
+        uv_i = [outer[i][ends_i[0]].ctrl[-1], outer[i][ends_i[1]].ctrl[0]]
+        uv_j = [outer[j][ends_j[0]].ctrl[-1], outer[j][ends_j[1]].ctrl[0]]
+        pi = si.evaluate(*np.array(uv_i).T)
+        pj = sj.evaluate(*np.array(uv_j).T)
+        swap = np.linalg.norm(pi[0] - pj[0]) + np.linalg.norm(pi[1] - pj[1]) > \
+            np.linalg.norm(pi[0] - pj[1]) + np.linalg.norm(pi[1] - pj[0])
+        order = [1, 0] if swap else [0, 1]
+        x0 = np.c_[np.array(uv_i), np.array(uv_j)[order]]
+        problem = _SurfaceProblem(si, sj)
+        x, _ = _newton_min_norm(problem, x0, 0.0, iters=20)
+        # (face, piece index, which control point) of each join row of x, on either face
+        for k, ends, side, cols in ((i, ends_i, [0, 1], slice(0, 2)), (j, [ends_j[o] for o in order], order, slice(2, 4))):
+            for m, (piece_index, s) in enumerate(zip(ends, side)):
+                piece = outer[k][piece_index]
+                ctrl = piece.ctrl.copy()
+                ctrl[-1 if s == 0 else 0] = x[m, cols]     # the piece before the edge ends at its join
+                outer[k][piece_index] = replace(piece, ctrl=ctrl)
+    return [FreeformShape(s.fit, s.loops, o, s.holes) for s, o in zip(shapes, outer)]
