@@ -441,11 +441,17 @@ def mesh_deviation(mesh: Mesh, per_edge: int = 8) -> float:
     return worst
 
 
-def face_samples(objs, samples: int = 60):
+def face_samples(objs, samples: int = 60, curve_tol=None):
     """(points (k, 3) on the exact faces, model size): up to `samples` mesh vertices per face, from a
-    coarse tessellation (tol = size / 200); used to verify exported files against rgm's evaluation."""
+    coarse tessellation (tol = size / 200); used to verify exported files against rgm's evaluation.
+    Lazy intersections in trims are approximated at `curve_tol` (model units, or a function of the
+    model size giving them; default: the model tolerance): a verifier that holds a file to finer than
+    the model tolerance passes its own fraction, so that the vertices on an intersection edge are as
+    accurate as the file's exact edge is held to be."""
     faces = collect_faces(objs, tol=None)
     size = _model_size(faces)
+    if curve_tol is not None:
+        faces = collect_faces(objs, tol=curve_tol(size) if callable(curve_tol) else curve_tol)
     mesh = tessellate_faces(faces, size / 200)
     pts = []
     for f in faces:

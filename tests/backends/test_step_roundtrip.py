@@ -1,6 +1,8 @@
 """STEP files written by rgm, read back by OpenCASCADE's STEPControl_Reader: same faces and surface
 types, BRepCheck_Analyzer valid, every face's points within 1e-7 x size of rgm's own evaluation; the
 schema, units and binding names are in the file; --verify refuses a bad file and keeps nothing."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
@@ -225,3 +227,19 @@ def test_bad_options_are_clear_errors(tmp_path):
     with pytest.raises(BackendError, match="schema"):
         occ.write_step(pin_model(), tmp_path / "x.step", schema="AP999")
     assert not (tmp_path / "x.step").exists()
+
+
+def test_the_first_step_file_of_a_process_has_the_schema_and_units_asked(tmp_path):
+    """OpenCASCADE initialises its STEP controllers on the first writer a process makes and resets their
+    static parameters then: the first file used to come out AP214 in millimetres whatever was asked (a
+    flaky test, depending on which test ran first in a worker). A fresh interpreter writes one file."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "first.step"
+    code = ("import sys; sys.path.insert(0, %r); from test_step_roundtrip import pin_model; "
+            "from rgm.backends.occ import write_step; write_step(pin_model('cm'), %r, schema='AP242')"
+            % (str(Path(__file__).parent), str(out)))
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
+    text = out.read_text()
+    assert "AP242" in text and "SI_UNIT(.CENTI.,.METRE.)" in text
