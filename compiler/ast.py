@@ -1,8 +1,8 @@
 """The typed syntax tree of `.rgm` text, as `rgm.compiler.parser.parse` builds it.
 
-Every node is a frozen dataclass whose last field is `span: Span | None` (where it came from in the
-source), excluded from equality and hashing: two trees are equal when they say the same thing, however
-they are laid out. That is what lets the property tests check `parse(format(tree)) == tree`.
+Every node is a frozen, slotted dataclass whose last field is `span: Span | None` (where it came
+from in the source), excluded from equality and hashing: two trees are equal when they say the same
+thing, however they are laid out. That is what lets the property tests check `parse(format(tree)) == tree`.
 
 Statements carry their comments so that the formatter can keep them: `leading` holds the `# ...` lines
 written before the statement (and any comments found inside a multi-line statement, which the formatter
@@ -44,7 +44,7 @@ def _span():
 
 # ----------------------------------------------------------------------------------------- expressions
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Number:
     """A numeric literal. `value` is the number as written, in `unit` (one of UNITS, or None for a bare
     number); conversion to model units/radians is the evaluator's job. `is_int` is True when the literal
@@ -57,7 +57,7 @@ class Number:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class String:
     """A string literal; `value` is the decoded text (`\\"`, `\\\\`, `\\n`, `\\t` resolved)."""
 
@@ -65,7 +65,7 @@ class String:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Name:
     """A reference to a binding, parameter, fn parameter or builtin."""
 
@@ -73,7 +73,7 @@ class Name:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Call:
     """`func(args..., key: value, ...)`. Positional arguments come first (the parser rejects a positional
     argument after a named one); `kwargs` is a tuple of (name, expr) pairs in source order, so a
@@ -89,7 +89,7 @@ class Call:
         return next((e for k, e in self.kwargs if k == name), None)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class ListExpr:
     """`[a, b, ...]`; may be empty."""
 
@@ -97,7 +97,7 @@ class ListExpr:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class BinOp:
     """`left op right` with op one of `+ - * /`; `*` and `/` bind tighter, all are left-associative."""
 
@@ -107,7 +107,7 @@ class BinOp:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Neg:
     """Unary minus `-operand`. A negative literal `-2` is Neg(Number(2)), never Number(-2)."""
 
@@ -115,7 +115,7 @@ class Neg:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Member:
     """`obj.attr`, e.g. `c.start`, `p.x`, `s.domain`."""
 
@@ -124,7 +124,7 @@ class Member:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, slots=True)
 class Net:
     """The dense numeric form `net 40 x 40 [x y z, ...]` (or `net 12 [...]`): a grid of entries of
     `width` numbers (1 to 4: a scalar, a uv, an xyz, or xyz plus weight).
@@ -161,7 +161,7 @@ Expr = Union[Number, String, Name, Call, ListExpr, BinOp, Neg, Member, Net]
 
 # ------------------------------------------------------------------------------------------ statements
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Annotation:
     """`@name(key: value, ...)` before a binding: what a fitter knows about it (`@fit`, `@classified`,
     `@source`). `args` is a tuple of (key, expr) in source order; `@name` alone has no args."""
@@ -174,7 +174,7 @@ class Annotation:
         return next((e for k, e in self.args if k == key), None)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class TypeRef:
     """A type written in a fn parameter: `num`, `point3`, `list[point3]` (name "list", args (point3,))."""
 
@@ -186,7 +186,7 @@ class TypeRef:
         return self.name + (f"[{', '.join(map(str, self.args))}]" if self.args else "")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Param:
     """One parameter of a user function: `name: type`."""
 
@@ -195,7 +195,7 @@ class Param:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Units:
     """`units mm;` (one of LENGTH_UNITS)."""
 
@@ -206,7 +206,7 @@ class Units:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Tolerance:
     """`tolerance 0.001;` (a Number, possibly with a length unit)."""
 
@@ -217,7 +217,7 @@ class Tolerance:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Binding:
     """`name := expr;` or, with `is_param`, `param name := expr;` (overridable with `-D name=value`).
     `name_span` is the span of the bound name alone."""
@@ -233,7 +233,7 @@ class Binding:
     name_span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class FnDef:
     """`fn name(a: num, p: point3) := body;` a small user function, expanded where it is called."""
 
@@ -248,7 +248,7 @@ class FnDef:
     name_span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Export:
     """`export a, b;`: the bindings the back ends emit (Name nodes, for their spans)."""
 
@@ -262,7 +262,7 @@ class Export:
 Stmt = Union[Units, Tolerance, Binding, FnDef, Export]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Comment:
     """One `# ...` comment; `text` includes the `#` and has no trailing newline."""
 
@@ -270,7 +270,7 @@ class Comment:
     span: Span | None = _span()
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Program:
     """A whole file. `statements` in source order; `end_comments` are the comment lines after the last
     statement. `comments` lists every comment with its span (for tools; not compared).

@@ -13,11 +13,11 @@ override when there is one); `result.types` maps `id(expr)` and binding names to
 """
 from __future__ import annotations
 
-import gc
 import sys
 from dataclasses import dataclass, field
 
 from . import ast as A
+from . import gcpause
 from . import types as T
 from .builtins import ANNOTATIONS, FRACTIONS, FUNCTIONS, Param, Signature
 from .diagnostics import Diagnostic, Span, error, sort_and_dedupe, warning
@@ -52,6 +52,9 @@ class CheckResult:
 
 
 _NO_LOCALS: frozenset = frozenset()
+_ANGLE_UNITS = ("deg", "rad")
+_BINARY: dict = {}      # (op, left, right) -> T.binary(op, left, right)
+_EXPORTABLE: dict = {}  # type -> T.accepts(T.EXPORTABLE, type)
 _NO_ENV: dict = {}      # the (never written) environment outside fns
 #: recursion limit for a second attempt on very deep expressions (about 4 frames per level)
 DEEP_LIMIT = 100_000
@@ -173,7 +176,10 @@ class _Checker:
         for name in stmt.names:
             if name.id in self.res.bindings:
                 t = self.binding_type(name.id)
-                if not T.accepts(T.EXPORTABLE, t):
+                ok = _EXPORTABLE.get(t)
+                if ok is None:
+                    ok = _EXPORTABLE[t] = T.accepts(T.EXPORTABLE, t)
+                if not ok:
                     hint = "export what it moves: `placed := place(g, t);`" if t == T.TRANSFORM else None
                     self.diags.append(error("E0310", f"cannot export `{name.id}`: it is {T.describe(t)}, not geometry",
                                             name.span, f"{T.describe(t)}", [f"exportable: {T.EXPORTABLE}"], hint))
@@ -191,26 +197,39 @@ class _Checker:
                 continue
             sig = builtin.overloads[0]
             kwargs = [(k, e, self.infer(e, _NO_ENV)) for k, e in ann.args]
-            key = (ann.name, tuple((k, t) for k, _, t in kwargs))
-            if key in self.fitting:        # these fields with these types were found to fit
-                bound = {k: [Arg(e, t, None)] for k, e, t in kwargs}
-            else:
-                clean = len(self.diags)
-                bound = self.bind(ann.name, sig, [], kwargs, ann.span, builtin.notes, annotation=True)
-                for field_name, args in bound.items():
-                    param = sig.param(field_name)
-                    expected = param.type if param else sig.extra
-                    self.mismatch(ann.name, field_name, expected, args[0], builtin.notes, annotation=True)
-                if len(self.diags) == clean:
-                    self.fitting.add(key)
+            key = (ann.name, tuple([(k, t) for k, _, t in kwargs]))
+            if key in self.fitting:        # these fields with these types were found to fit (so each once)
+                for field_name, e, _ in kwargs:
+                    if (ann.name, field_name) in FRACTIONS:
+                        self.values.fraction(ann.name, field_name, e)
+                continue
+            clean = len(self.diags)
+            bound = self.bind(ann.name, sig, [], kwargs, ann.span, builtin.notes, annotation=True)
+            for field_name, args in bound.items():
+                param = sig.param(field_name)
+                expected = param.type if param else sig.extra
+                self.mismatch(ann.name, field_name, expected, args[0], builtin.notes, annotation=True)
+            if len(self.diags) == clean:
+                self.fitting.add(key)
             for field_name, args in bound.items():
                 if (ann.name, field_name) in FRACTIONS:
                     self.values.fraction(ann.name, field_name, args[0].expr)
 
     # ------------------------------------------------------------------------------------ expressions
     def infer(self, expr, env: dict[str, T.Type]) -> T.Type:
-        rule = self._RULES.get(type(expr))
-        t = rule(self, expr, env) if rule else T.ANY
+        cls = expr.__class__
+        if cls is A.Number:     # the most common nodes are typed here, as `number` and `name` do
+            unit = expr.unit
+            t = (T.ANGLE if unit in _ANGLE_UNITS else T.LENGTH) if unit else (T.INT if expr.is_int else T.NUM)
+        elif cls is A.Name:
+            name = expr.id
+            if env and name in env:
+                t = env[name]
+            else:
+                t = self.types.get(name) or self.binding_type(name)   # a binding's type is kept by its name
+        else:
+            rule = self._RULES.get(cls)
+            t = rule(self, expr, env) if rule else T.ANY
         self.types[id(expr)] = t
         return t
 
@@ -243,7 +262,10 @@ class _Checker:
 
     def binop(self, expr: A.BinOp, env) -> T.Type:
         left, right = self.infer(expr.left, env), self.infer(expr.right, env)
-        t = T.binary(expr.op, left, right)
+        key = (expr.op, left, right)
+        t = _BINARY.get(key, _BINARY)
+        if t is _BINARY:         # T.binary of interned types, worked out once per combination
+            t = _BINARY[key] = T.binary(expr.op, left, right)
         if t is None:
             hint = None
             lit = expr.right if isinstance(expr.right, A.Number) else expr.left
@@ -459,12 +481,11 @@ _Checker._RULES = {
 def check(program: A.Program, params: dict[str, str] | None = None) -> CheckResult:
     """Resolve names, check types and constant values of `program`; `params` are `-D name=value` texts.
 
-    The cyclic garbage collector is paused meanwhile: the checker allocates many small objects that
-    live as long as the AST, and on a large file collector passes over the tree cost more than the
-    checking itself (measured: 2.7x on 20 000 statements)."""
-    enabled, limit = gc.isenabled(), sys.getrecursionlimit()
-    gc.disable()
-    try:
+    The cyclic garbage collector is paused meanwhile (rgm.compiler.gcpause): the checker allocates many
+    small objects that live as long as the AST, and on a large file collector passes over the tree
+    cost more than the checking itself (measured: 2.7x on 20 000 statements)."""
+    limit = sys.getrecursionlimit()
+    with gcpause.paused():
         try:
             return _check(program, params)
         except RecursionError:   # a long chain such as 1 + 1 + ... + 1: Python frames are heap-allocated
@@ -474,10 +495,8 @@ def check(program: A.Program, params: dict[str, str] | None = None) -> CheckResu
             except RecursionError:
                 return CheckResult([error("E0311", f"an expression is nested more than {DEEP_LIMIT // 4} levels "
                                           "deep; split it into bindings", program.span)])
-    finally:
-        sys.setrecursionlimit(limit)
-        if enabled:
-            gc.enable()
+        finally:
+            sys.setrecursionlimit(limit)
 
 
 def _check(program: A.Program, params: dict[str, str] | None) -> CheckResult:

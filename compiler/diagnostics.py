@@ -16,9 +16,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, slots=True)
 class Span:
-    """A region of source text: 1-based line and column, end exclusive; `file` is the path as given."""
+    """A region of source text: 1-based line and column, end exclusive; `file` is the path as given.
+    (Slotted: a parse makes one per node, and a dict each would triple the tree's memory.)"""
 
     file: str
     line: int

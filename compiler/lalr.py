@@ -3,7 +3,8 @@
 lark computes the LALR(1) parse table of grammar/rgm.lark; lark's own parse loop, token objects,
 lexer classes and callback wrappers cost about 20 µs per token in CPython. This module uses the same
 table and the same tree-building callbacks (so it builds the same AST), at a fraction of the cost:
-  * one regex `findall` (a single C call) splits the text into (blanks, net, token) triples; a
+  * one regex `findall` (a single C call per 64 KB piece, see `_pieces`) splits the text into
+    (blanks, net, token) triples; a
     token's kind is looked up by its spelling, and lines and columns are counted along the way. A
     NAME that spells a keyword (`units`, `param`, ...) becomes the keyword only where the table
     accepts it, which is exactly what lark's contextual lexer does;
@@ -33,6 +34,7 @@ _ORDER = ("NET", "COMMENT", "NUMBER", "STRING", "ANNOTATION", "NAME", "DEFINE")
 _BLANK = "[ \t\f\r\n]"
 _KIND_CACHE = 200_000   # distinct token spellings remembered between parses
 _SHAPE_CACHE = 20_000   # statement shapes remembered between parses
+_PIECE = 1 << 16        # characters lexed by one findall (a list per piece, not one for the whole text)
 _COMPILE_AFTER = 2      # a shape is compiled on its 3rd statement (compiling costs about 3 table runs)
 
 
@@ -67,7 +69,8 @@ _KEPT, _DROPPED, _COMMENT, _ERROR, _END = "kept", "dropped", "comment", "error",
 class FastLALR:
     """Drive `lark_obj`'s LALR table with the callbacks of `builder` (a lark Transformer)."""
 
-    def __init__(self, lark_obj: Lark, builder):
+    def __init__(self, lark_obj: Lark, builder, inliner=None):
+        self.inliner = inliner     # writes reductions out in compiled statements (see `_Source`)
         frontend = lark_obj.parser.parser.parser
         table = frontend.parse_table
         self.states = table.states
@@ -121,54 +124,56 @@ class FastLALR:
         shape: list[str] = []    # the kinds of all its tokens (keyword spellings as themselves)
         keep, note = toks.append, shape.append
         pos, line, bol = 0, 1, 0           # offset after the last token, its line, where that line begins
-        for blank, net, value in self.splitter.findall(text):
-            start = pos + len(blank)
-            if "\n" in blank:
-                line += blank.count("\n")
-                bol = start - len(blank) + blank.rindex("\n") + 1
-            if net:
-                value, kind, key, role = net, "NET", "NET", _KEPT
-                pos = start + len(value)
-                col, first_line = start - bol + 1, line
-                if "\n" in value:
-                    line += value.count("\n")
-                    bol = start + value.rindex("\n") + 1
-                tok = _tuple_new(Tok, (kind, value, start, pos, first_line, col, line, pos - bol + 1))
-            else:
-                pos = start + len(value)
-                known = kinds.get(value)
-                if known is None:
-                    known = kinds[value] = self.learn(value)
-                kind, key, role = known
-                if role is _DROPPED:
-                    note(key)
-                    continue
-                tok = _tuple_new(Tok, (kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1))
-                if role is _COMMENT:
-                    on_comment(tok)
-                    continue
-                if role is _ERROR:
-                    return False
-            keep(tok)
-            note(key)
-            if role is _END:
-                key = tuple(shape)
-                build = shapes.get(key, 0)
-                if type(build) is int:     # built `build` times: run the table, compile once it repeats
-                    first = shapes is self.shapes[0]
-                    if build < _COMPILE_AFTER:
-                        if not self.direct(key, first, toks):
-                            return False
-                        shapes[key] = build + 1
-                        build = None
-                    else:              # a shape that has built statements: it compiles
-                        direct = functools.partial(self.direct, key, first)
-                        build = shapes[key] = self.run(key, first, _Source(self.methods, direct))
-                if build is not None:
-                    build(toks)
-                shapes = self.shapes[1]
-                toks.clear()     # nothing keeps the lists: the next statement reuses them
-                shape.clear()
+        findall = self.splitter.findall
+        for _, end in _pieces(text):
+            for blank, net, value in findall(text, pos, end):
+                start = pos + len(blank)
+                if "\n" in blank:
+                    line += blank.count("\n")
+                    bol = start - len(blank) + blank.rindex("\n") + 1
+                if net:
+                    value, kind, key, role = net, "NET", "NET", _KEPT
+                    pos = start + len(value)
+                    col, first_line = start - bol + 1, line
+                    if "\n" in value:
+                        line += value.count("\n")
+                        bol = start + value.rindex("\n") + 1
+                    tok = _tuple_new(Tok, (kind, value, start, pos, first_line, col, line, pos - bol + 1))
+                else:
+                    pos = start + len(value)
+                    known = kinds.get(value)
+                    if known is None:
+                        known = kinds[value] = self.learn(value)
+                    kind, key, role = known
+                    if role is _DROPPED:
+                        note(key)
+                        continue
+                    tok = _tuple_new(Tok, (kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1))
+                    if role is _COMMENT:
+                        on_comment(tok)
+                        continue
+                    if role is _ERROR:
+                        return False
+                keep(tok)
+                note(key)
+                if role is _END:
+                    key = tuple(shape)
+                    build = shapes.get(key, 0)
+                    if type(build) is int:     # built `build` times: run the table, compile once it repeats
+                        first = shapes is self.shapes[0]
+                        if build < _COMPILE_AFTER:
+                            if not self.direct(key, first, toks):
+                                return False
+                            shapes[key] = build + 1
+                            build = None
+                        else:              # a shape that has built statements: it compiles
+                            direct = functools.partial(self.direct, key, first)
+                            build = shapes[key] = self.run(key, first, _Source(self.methods, direct, self.inliner))
+                    if build is not None:
+                        build(toks)
+                    shapes = self.shapes[1]
+                    toks.clear()     # nothing keeps the lists: the next statement reuses them
+                    shape.clear()
         return not shape                   # text after the last `;` is an unfinished statement
 
     def learn(self, value: str) -> tuple[str, str, str]:
@@ -210,7 +215,7 @@ class FastLALR:
                     if kind in dropped:
                         values.append(None)
                     else:
-                        values.append(out.token(kept))
+                        values.append(out.token(kept, kind))
                         kept += 1
                     break
                 size = action.size
@@ -231,13 +236,42 @@ class FastLALR:
                 values.append(action.reduce(popped, out.node))
 
 
+def _pieces(text: str):
+    """Where to cut `text` for lexing piece by piece: yields (0, end), (0, end), ..., each end just
+    after a newline that no token spans (the caller lexes from where its last token ended, so the
+    start is not used). Lexing piece by piece gives the same tokens as one findall over the text,
+    and a list of a few thousand triples at a time instead of millions."""
+    n, end = len(text), 0
+    while end < n:
+        end = _cut(text, end, end + _PIECE)
+        yield 0, end
+
+
+def _cut(text: str, lo: int, at: int) -> int:
+    """The offset just after the first newline from `at` on that no token spans (or the text's end);
+    `lo` is a token boundary before `at`. Only a net can span a newline, and none spans one with a
+    `]` between the last `net` before it and it (a net's head holds no `n`, its body no `]`); when
+    that fails, the first newline after the next `]` is tried (linear time, however long the net)."""
+    n = len(text)
+    cut = text.find("\n", at)
+    while cut >= 0:
+        last_net = text.rfind("net", lo, cut)
+        if last_net < 0 or text.find("]", last_net, cut) >= 0:
+            return cut + 1
+        close = text.find("]", cut)
+        if close < 0:
+            return n
+        cut = text.find("\n", close)
+    return n
+
+
 class _Direct:
     """Builds one statement while the table runs: tokens and builder calls as they come."""
 
     def __init__(self, toks: list, methods: dict):
         self.toks, self.methods = toks, methods
 
-    def token(self, k: int):
+    def token(self, k: int, kind: str):
         return self.toks[k]
 
     def retype(self, k: int, kind: str) -> None:
@@ -250,26 +284,68 @@ class _Direct:
         return True
 
 
+class Code:
+    """A value of the statement being written by `_Source`: `src` is the Python expression that holds
+    it in the function (`t[3]` for the 4th kept token, `n5` for a node); `kind` is a token's kind
+    (after keyword retyping), the node class an inliner made (`"Number"`, `"kwarg"`, ...), or None
+    when nothing is known (a builder method called as such); `tok` is a token's index; `span` holds
+    the expressions of (line, col, start_pos, end_line, end_col, end_pos) where they are known."""
+
+    __slots__ = ("src", "kind", "tok", "span")
+
+    def __init__(self, src: str, kind: str | None, tok: int | None = None, span: tuple | None = None):
+        self.src, self.kind, self.tok, self.span = src, kind, tok, span
+
+    def __repr__(self):
+        return f"Code({self.src!r}, {self.kind!r})"
+
+
 class _Source:
     """Writes what the table does as Python source, `def build(t): ...` over the kept tokens `t`, and
-    compiles it: the builder calls nest as the reductions did, so they run in the same order. A
-    statement nested too deeply for Python's compiler (about 200 levels) is left to `fallback`."""
+    compiles it: one line per reduction, in the order the reductions ran, so the builder calls run in
+    the same order. Every kept token is unpacked once at the top (`_, v3, s3, e3, l3, c3, m3, d3 =
+    t[3]`: value, start, end, line, col, end line, end col). A reduction is written by `inliner.emit`
+    when it has a template for it (the builder's work written out in place: no call, no children list),
+    else as a call of the builder method. A function Python cannot compile is left to `fallback`."""
 
-    def __init__(self, methods: dict, fallback):
-        self.methods, self.fallback, self.lines = methods, fallback, []
+    def __init__(self, methods: dict, fallback, inliner=None):
+        self.methods, self.fallback, self.inliner = methods, fallback, inliner
+        self.lines: list[str] = []
+        self.count = 0       # kept tokens
+        self.fresh = 0       # node variables
 
-    def token(self, k: int) -> str:
-        return f"t[{k}]"
+    def token(self, k: int, kind: str) -> Code:
+        self.count = max(self.count, k + 1)
+        return Code(f"t[{k}]", kind, k, (f"l{k}", f"c{k}", f"s{k}", f"m{k}", f"d{k}", f"e{k}"))
 
     def retype(self, k: int, kind: str) -> None:
         self.lines.append(f"t[{k}] = t[{k}]._replace(type={kind!r})")
 
-    def node(self, method: str, children: list) -> str:
-        return f"{method}([{', '.join(children)}])"
+    def var(self) -> str:
+        self.fresh += 1
+        return f"n{self.fresh}"
+
+    def node(self, method: str, children: list) -> Code:
+        if self.inliner is not None:
+            made = self.inliner.emit(self, method, children)
+            if made is not None:
+                return made
+        return self.call(method, children)
+
+    def call(self, method: str, children: list, kind: str | None = None, span: tuple | None = None) -> Code:
+        """`nK = method([children])`: the builder method itself."""
+        var = self.var()
+        self.lines.append(f"{var} = {method}([{', '.join(c.src for c in children)}])")
+        return Code(var, kind, None, span)
 
     def done(self, built: list):
-        source = "def build(t):\n" + "".join(f"    {line}\n" for line in self.lines + built)
+        head = list(self.inliner.prologue) if self.inliner is not None else []
+        head += [f"_, v{k}, s{k}, e{k}, l{k}, c{k}, m{k}, d{k} = t[{k}]" for k in range(self.count)]
+        body = head + self.lines + [c.src for c in built if isinstance(c, Code) and c.tok is None and not c.src.isidentifier()]
+        source = "def build(t):\n" + "".join(f"    {line}\n" for line in body or ["pass"])
         namespace = dict(self.methods)
+        if self.inliner is not None:
+            namespace.update(self.inliner.namespace)
         try:
             exec(compile(source, "<statement>", "exec"), namespace)
         except (SyntaxError, RecursionError, MemoryError):   # "too many nested parentheses"

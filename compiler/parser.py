@@ -25,7 +25,6 @@ units, E0009 too many syntax errors (parsing stopped).
 from __future__ import annotations
 
 import functools
-import gc
 import re
 import threading
 from dataclasses import fields, replace
@@ -36,8 +35,9 @@ from lark.exceptions import UnexpectedCharacters, UnexpectedInput, UnexpectedTok
 from rgm.grammar import GRAMMAR_PATH
 
 from . import ast as A
+from . import gcpause
 from .diagnostics import Diagnostic, Span, error
-from .lalr import FastLALR, Tok
+from .lalr import Code, FastLALR, Tok
 
 MAX_ERRORS = 40
 
@@ -69,10 +69,8 @@ def parse(text: str | bytes, filename: str = "<input>", *, fast: bool = True
     the same tree, which the tests check."""
     if isinstance(text, (bytes, bytearray)):
         text = bytes(text).decode("utf-8", errors="replace")
-    with _LOCK:
+    with _LOCK, gcpause.paused():    # the tree has no cycles (rgm.compiler.gcpause)
         run = _Run(text, filename)
-        collecting = gc.isenabled()
-        gc.disable()     # the tree has no cycles; collection passes during parsing cost a quarter
         try:
             try:
                 run.parse(fast)
@@ -81,22 +79,32 @@ def parse(text: str | bytes, filename: str = "<input>", *, fast: bool = True
             return run.program(), run.diags
         finally:
             _BUILDER.run = None   # the tree is the caller's: freeing it must not wait for the next parse
-            if collecting:
-                gc.enable()
 
 
 # ------------------------------------------------------------------------------------------------ AST
 
+def _twin(cls):
+    """A plain class with the slots of the frozen, slotted dataclass `cls`: an instance of it, its
+    slots set by ordinary assignment, becomes a `cls` by `__class__` assignment (allowed between
+    classes of the same layout). Three times as fast as the generated __init__, whose every field
+    goes through `object.__setattr__` past the frozen __setattr__; the result is the same object."""
+    names = tuple(f.name for f in fields(cls))
+    assert cls.__slots__ == names, cls
+    twin = type(cls.__name__, (), {"__slots__": names})
+    probe = object.__new__(twin)
+    probe.__class__ = cls       # raises now, at import, if the layouts ever differ
+    return twin
+
+
 def _maker(cls):
-    """A constructor for the frozen dataclass `cls` taking every field in order: the field dict is
-    written in one step, without the per-field `object.__setattr__` of the generated __init__ (twice
-    as fast; spans and nodes are most of the objects a parse creates). The result is the same
-    object: same fields, equality and hash."""
+    """A constructor for the frozen dataclass `cls` taking every field in order (see `_twin`): spans
+    and nodes are most of the objects a parse creates."""
     names = [f.name for f in fields(cls)]
     assert not any(n.endswith("_") for n in names)
-    source = (f"def make({', '.join(names)}):\n    made_ = new_(cls_)\n"   # no field ends with `_`
-              f"    made_.__dict__.update({{{', '.join(f'{n!r}: {n}' for n in names)}}})\n    return made_\n")
-    namespace = {"new_": object.__new__, "cls_": cls}
+    source = (f"def make({', '.join(names)}):\n    made_ = new_(twin_)\n"   # no field ends with `_`
+              + "".join(f"    made_.{n} = {n}\n" for n in names)
+              + "    made_.__class__ = cls_\n    return made_\n")
+    namespace = {"new_": object.__new__, "twin_": _twin(cls), "cls_": cls}
     exec(source, namespace)
     return namespace["make"]
 
@@ -118,8 +126,13 @@ def _read_number(text: str) -> tuple[float, str | None, bool]:
     return float(text), unit, text.isdigit()
 
 
-#: spelling -> `_read_number(spelling)`: files repeat their numbers (cleared when it grows large)
+#: spelling -> `_read_number(spelling)`: files repeat their numbers (cleared when it grows large);
+#: only finite values (an infinite one is an error, reported each time)
 _NUMBERS: dict[str, tuple[float, str | None, bool]] = {}
+
+
+def _unescape(raw: str) -> str:
+    return re.sub(r"\\(.)", lambda m: _ESCAPES.get(m.group(1), m.group(1)), raw)
 
 
 @functools.cache
@@ -160,7 +173,9 @@ class _Builder(Transformer):
         if known is None:
             if len(_NUMBERS) > 100_000:
                 _NUMBERS.clear()
-            known = _NUMBERS[text] = _read_number(text)
+            known = _read_number(text)
+            if known[0] != _INF:       # the compiled statements take what the cache holds as valid
+                _NUMBERS[text] = known
         value, unit, is_int = known
         span = _SPAN(self.run.filename, line, col, end_line, end_col, start, end)
         if value == _INF:
@@ -171,8 +186,7 @@ class _Builder(Transformer):
 
     def string(self, c):
         raw = c[0].value[1:-1]
-        value = re.sub(r"\\(.)", lambda m: _ESCAPES.get(m.group(1), m.group(1)), raw) if "\\" in raw else raw
-        return _STRING(value, self._token_span(c[0]))
+        return _STRING(_unescape(raw) if "\\" in raw else raw, self._token_span(c[0]))
 
     def name(self, c):
         _, text, start, end, line, col, end_line, end_col = c[0] if c[0].__class__ is Tok else Tok.from_lark(c[0])
@@ -267,6 +281,157 @@ class _Builder(Transformer):
         return None
 
 
+# --------------------------------------------------------------------------- compiled statements
+
+def _tuple_src(items: list[str]) -> str:
+    return f"({items[0]},)" if len(items) == 1 else f"({', '.join(items)})"
+
+
+class _Inliner:
+    """Templates for the statements the fast driver compiles (rgm.compiler.lalr._Source): each writes
+    out, as Python source, what the `_Builder` method of its name does with Tok tokens, making the same
+    nodes and spans, in the same order, without the method call, the children list or the unpacking
+    of tokens per node (the tokens are unpacked once; spans are assembled from their fields). A
+    template declines (returns None: the method itself is called) on anything unusual, such as a
+    positional argument after a named one (E0007) or a child it knows nothing about; a number the
+    cache does not hold yet (or that is out of range, E0006) goes through `_Builder._number`, and a
+    net through `_Builder.net`."""
+
+    prologue = ("R_ = B_.run", "F_ = R_.filename")
+    _CLASSES = (Span, A.Number, A.String, A.Name, A.Call, A.ListExpr, A.BinOp, A.Neg, A.Member,
+                A.Annotation, A.Binding, A.Export)
+
+    def __init__(self, builder: _Builder):
+        self.namespace = {"B_": builder, "new_": object.__new__, "NUMS_get": _NUMBERS.get, "unescape_": _unescape}
+        self.fields = {}
+        for cls in self._CLASSES:
+            self.namespace["C_" + cls.__name__] = cls
+            self.namespace["T_" + cls.__name__] = _twin(cls)
+            self.fields[cls.__name__] = [f.name for f in fields(cls)]
+
+    def emit(self, out, method: str, c: list[Code]) -> Code | None:
+        template = getattr(self, "t_" + method, None)
+        return None if template is None else template(out, c)
+
+    # -- writing
+    def new(self, out, cls: str, values: list[str], indent: str = "", var: str | None = None) -> str:
+        """`var = <a cls with these field values, in field order>` (made as `_maker` makes it)."""
+        var = var or out.var()
+        out.lines.append(f"{indent}{var} = new_(T_{cls})")
+        out.lines += [f"{indent}{var}.{k} = {v}" for k, v in zip(self.fields[cls], values, strict=True)]
+        out.lines.append(f"{indent}{var}.__class__ = C_{cls}")
+        return var
+
+    def span(self, out, first: Code, last: Code, indent: str = "") -> str:
+        """A Span from the start of `first` to the end of `last` (as `_Builder._span`)."""
+        (line, col, start, _, _, _), (_, _, _, end_line, end_col, end) = first.span, last.span
+        return self.new(out, "Span", ["F_", line, col, end_line, end_col, start, end], indent)
+
+    @staticmethod
+    def known(*codes: Code) -> bool:
+        return all(c.kind is not None and c.span is not None for c in codes)
+
+    # -- expressions
+    def t_number(self, out, c):
+        tok = c[0]
+        k, var = tok.tok, out.var()
+        out.lines += [f"k_ = NUMS_get(v{k})", "if k_ is None:", f"    {var} = number([t[{k}]])", "else:"]
+        sp = self.span(out, tok, tok, "    ")
+        self.new(out, "Number", ["k_[0]", "k_[1]", "k_[2]", sp], "    ", var)
+        return Code(var, "Number", None, tok.span)
+
+    def t_string(self, out, c):
+        tok = c[0]
+        out.lines += [f"x_ = v{tok.tok}[1:-1]", 'if "\\\\" in x_:', "    x_ = unescape_(x_)"]
+        return Code(self.new(out, "String", ["x_", self.span(out, tok, tok)]), "String", None, tok.span)
+
+    def t_name(self, out, c):
+        tok = c[0]
+        return Code(self.new(out, "Name", [f"v{tok.tok}", self.span(out, tok, tok)]), "Name", None, tok.span)
+
+    def t_kwarg(self, out, c):
+        return Code(f"(v{c[0].tok}, {c[1].src})", "kwarg", None, None)
+
+    def t_call(self, out, c):
+        items = c[1:-1]
+        if any(i.kind is None for i in items):
+            return None
+        kinds = [i.kind == "kwarg" for i in items]
+        if kinds != sorted(kinds):     # a positional argument after a named one: E0007
+            return None
+        func = self.new(out, "Name", [f"v{c[0].tok}", self.span(out, c[0], c[0])])
+        args = _tuple_src([i.src for i in items if i.kind != "kwarg"])
+        kwargs = _tuple_src([i.src for i in items if i.kind == "kwarg"])
+        sp = self.span(out, c[0], c[-1])
+        return Code(self.new(out, "Call", [func, args, kwargs, sp]), "Call", None, (*c[0].span[:3], *c[-1].span[3:]))
+
+    def t_listexpr(self, out, c):
+        sp = self.span(out, c[0], c[-1])
+        items = _tuple_src([i.src for i in c[1:-1]])
+        return Code(self.new(out, "ListExpr", [items, sp]), "ListExpr", None, (*c[0].span[:3], *c[-1].span[3:]))
+
+    def t_binop(self, out, c):
+        left, op, right = c
+        if not self.known(left, right):
+            return None
+        sp = self.span(out, left, right)
+        var = self.new(out, "BinOp", [f"v{op.tok}", left.src, right.src, sp])
+        return Code(var, "BinOp", None, (*left.span[:3], *right.span[3:]))
+
+    def t_neg(self, out, c):
+        minus, operand = c
+        if not self.known(operand):
+            return None
+        var = self.new(out, "Neg", [operand.src, self.span(out, minus, operand)])
+        return Code(var, "Neg", None, (*minus.span[:3], *operand.span[3:]))
+
+    def t_member(self, out, c):
+        obj, attr = c
+        if not self.known(obj):
+            return None
+        var = self.new(out, "Member", [obj.src, f"v{attr.tok}", self.span(out, obj, attr)])
+        return Code(var, "Member", None, (*obj.span[:3], *attr.span[3:]))
+
+    def t_net(self, out, c):
+        return out.call("net", c, "Net", c[0].span)
+
+    # -- declarations and statements
+    def t_annotation(self, out, c):
+        if any(x.kind is None for x in c[1:]) or any(x.tok is None and x.kind != "kwarg" for x in c[1:]):
+            return None
+        args = _tuple_src([x.src for x in c[1:] if x.kind == "kwarg"])
+        var = self.new(out, "Annotation", [f"v{c[0].tok}[1:]", args, self.span(out, c[0], c[-1])])
+        return Code(var, "Annotation", None, (*c[0].span[:3], *c[-1].span[3:]))
+
+    def statement(self, out, var: str, kind: str, c) -> Code:
+        out.lines += ["if R_.bad_positions:", f"    R_.statement({var})", "else:", f"    R_.statements.append({var})"]
+        return Code(var, kind, None, (*c[0].span[:3], *c[-1].span[3:]))
+
+    def t_binding(self, out, c):
+        if not self.known(*c):
+            return None
+        n = 0
+        while c[n].kind == "Annotation":
+            n += 1
+        is_param = c[n].tok is not None and c[n].kind == "PARAM"
+        name = c[n + 1] if is_param else c[n]
+        if name.tok is None:
+            return None
+        sp = self.span(out, c[0], c[-1])
+        name_span = self.span(out, name, name)
+        var = self.new(out, "Binding", [f"v{name.tok}", c[-2].src, str(is_param),
+                                        _tuple_src([a.src for a in c[:n]]), "()", "None", "False", sp, name_span])
+        return self.statement(out, var, "Binding", c)
+
+    def t_export(self, out, c):
+        if any(x.tok is None for x in c):
+            return None
+        names = [self.new(out, "Name", [f"v{x.tok}", self.span(out, x, x)]) for x in c[1:-1]]
+        sp = self.span(out, c[0], c[-1])
+        var = self.new(out, "Export", [_tuple_src(names), "()", "None", "False", sp])
+        return self.statement(out, var, "Export", c)
+
+
 _BUILDER = _Builder()
 _LOCK = threading.RLock()
 _PARSER: Lark | None = None
@@ -288,7 +453,7 @@ def fast_parser() -> FastLALR:
     """The tight driver over the same LALR table (rgm.compiler.lalr), used first by `parse`."""
     global _FAST
     if _FAST is None:
-        _FAST = FastLALR(lark_parser(), _BUILDER)
+        _FAST = FastLALR(lark_parser(), _BUILDER, _Inliner(_BUILDER))
     return _FAST
 
 
@@ -507,30 +672,53 @@ class _Run:
                          frozenset(self.broken), self.span(0, len(self.text)))
 
 
+def _restater(cls):
+    """`dataclasses.replace(stmt, leading=..., trailing=..., blank_before=...)` for statements of the
+    frozen, slotted class `cls`, made as `_maker` makes nodes (no generated __init__)."""
+    names = [f.name for f in fields(cls)]
+    changed = {"leading": "leading", "trailing": "trailing", "blank_before": "blank"}
+    source = ("def restate(stmt, leading, trailing, blank):\n    made_ = new_(twin_)\n"
+              + "".join(f"    made_.{n} = {changed.get(n, 'stmt.' + n)}\n" for n in names)
+              + "    made_.__class__ = cls_\n    return made_\n")
+    namespace = {"new_": object.__new__, "twin_": _twin(cls), "cls_": cls}
+    exec(source, namespace)
+    return namespace["restate"]
+
+
+_RESTATE = {cls: _restater(cls) for cls in (A.Units, A.Tolerance, A.Binding, A.FnDef, A.Export)}
+
+
 def _attach_comments(text: str, statements: list, comments: list[Token]):
     """Give each statement its leading comments (before it, or inside it) and its trailing comment
     (after its `;` on the same line); comments after the last statement are returned apart.
     Also marks `blank_before` where a blank line precedes a statement (or its first comment)."""
     out, ci, prev_end = [], 0, 0
+    starts = [t.start_pos for t in comments] + [len(text) + 2]   # a sentinel after every position
+    spans = [stmt.span for stmt in statements] + [None]
+    gap = _NEWLINE_GAP.search
+    last = len(statements) - 1
     for k, stmt in enumerate(statements):
-        sp = stmt.span
-        leading, first_pos = [], sp.start_pos
-        while ci < len(comments) and comments[ci].start_pos < sp.end_pos:
-            if not leading:
-                first_pos = min(first_pos, comments[ci].start_pos)
-            leading.append(comments[ci].value.rstrip())
-            ci += 1
+        sp = spans[k]
+        end = sp.end_pos
+        leading, first_pos = (), sp.start_pos
+        if starts[ci] < end:
+            first_pos = min(first_pos, starts[ci])
+            taken = []
+            while starts[ci] < end:
+                taken.append(comments[ci].value.rstrip())
+                ci += 1
+            leading = tuple(taken)
         trailing = None
-        next_start = statements[k + 1].span.start_pos if k + 1 < len(statements) else len(text) + 1
-        if (ci < len(comments) and comments[ci].line == sp.end_line and comments[ci].start_pos < next_start
-                and "\n" not in text[sp.end_pos:comments[ci].start_pos]):
+        next_start = spans[k + 1].start_pos if k < last else len(text) + 1
+        if (starts[ci] < next_start and comments[ci].line == sp.end_line
+                and "\n" not in text[end:starts[ci]]):
             trailing = comments[ci].value.rstrip()
             ci += 1
-        blank = k > 0 and bool(_NEWLINE_GAP.search(text, prev_end, first_pos))
+        blank = k > 0 and gap(text, prev_end, first_pos) is not None
         if leading or trailing or blank:
-            stmt = replace(stmt, leading=tuple(leading), trailing=trailing, blank_before=blank)
+            stmt = _RESTATE[stmt.__class__](stmt, leading, trailing, blank)
         out.append(stmt)
-        prev_end = sp.end_pos
+        prev_end = end
     return out, [t.value.rstrip() for t in comments[ci:]]
 
 

@@ -171,8 +171,10 @@ class _Resolver:
                 if func in fns or func not in FUNCTIONS:
                     self.callee(node.func, deps)
                 stack.extend(node.args)
-                for kwarg in node.kwargs:
-                    stack.append(kwarg[1])
+                if node.kwargs:
+                    stack.extend([kwarg[1] for kwarg in node.kwargs])
+            elif kind is A.Number:
+                continue
             elif kind is A.Name:
                 if node.id in bindings and node.id not in scope:
                     deps.append((node.id, node))
