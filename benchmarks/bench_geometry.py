@@ -30,6 +30,7 @@ are applied to the rational and derivative cases), and agreement within 1e-12 x 
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 import time
 
@@ -201,17 +202,11 @@ def verdict(ok: bool) -> str:
 def main() -> None:
     print(f"load average {os.getloadavg()[0]:.2f} / {os.getloadavg()[1]:.2f} (1 / 5 min) on "
           f"{os.cpu_count()} cpus at start; wall-clock times, shared machine")
-    try:
-        import geomdl  # noqa: F401
-        have_geomdl = True
-    except ImportError:
-        have_geomdl = False
+    have_geomdl = importlib.util.find_spec("geomdl") is not None
+    if not have_geomdl:
         print("geomdl not installed: skipped (pip install geomdl to compare)")
-    try:
-        import OCP  # noqa: F401
-        have_occ = True
-    except ImportError:
-        have_occ = False
+    have_occ = importlib.util.find_spec("OCP") is not None
+    if not have_occ:
         print("OpenCASCADE (OCP) not installed: skipped (pip install cadquery to compare)")
     u, v = parameters(POINTS)
     print(f"surface: degree {DEGREE}x{DEGREE}, net {NET}x{NET}, non-uniform clamped knots; "

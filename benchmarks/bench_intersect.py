@@ -9,6 +9,7 @@ skipped with a message when cadquery/OCP is not installed.
 """
 from __future__ import annotations
 
+import importlib.util
 import time
 
 import numpy as np
@@ -91,11 +92,8 @@ def occ_run(sa, sb, plane, tol):
 
 
 def main() -> None:
-    try:
-        import OCP  # noqa: F401
-        have_occ = True
-    except ImportError:
-        have_occ = False
+    have_occ = importlib.util.find_spec("OCP") is not None
+    if not have_occ:
         print("OpenCASCADE (OCP) not installed: printing rgm alone (pip install cadquery to compare)")
     cases = [("surface-surface", patch(1, 0.0, False), patch(2, 0.9, True).swap_uv(), None),
              ("surface-plane", patch(3, 0.0, True), None, (np.array([5.0, 5.0, 0.0]), np.array([0.3, -0.2, 1.0])))]

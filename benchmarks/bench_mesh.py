@@ -13,6 +13,7 @@ OpenCASCADE is skipped when absent.
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 import time
 
@@ -102,12 +103,8 @@ def best_of(runs, fn):
 
 
 def main():
-    try:
-        import OCP
-        del OCP   # only: is it installed?
-        have_occ = True
-    except ImportError:
-        have_occ = False
+    have_occ = importlib.util.find_spec("OCP") is not None
+    if not have_occ:
         print("OpenCASCADE (OCP) is not installed: printing rgm's figures only")
     cases = models()
     for obj in cases.values():   # warm both up: imports, caches, first-call costs

@@ -2,8 +2,6 @@
 offending expression, and clean models give no diagnostics."""
 from __future__ import annotations
 
-import pytest
-
 import rgm
 from rgm.compiler.diagnostics import CompileError
 
