@@ -273,7 +273,8 @@ class Gap:
 class PatchSet:
     """The fitted patches (largest first), the measured gaps between neighbours, and the points that
     belong to no patch (creases without a neighbouring patch, specks, slivers that could not be fitted,
-    each said in `skipped`)."""
+    each said in `skipped`, as is what was done to keep a patch's trimming loops valid:
+    `rgm.fitters.trimloops.TrimLoops.notes`)."""
 
     patches: list[PatchFit]
     gaps: list[Gap] = field(default_factory=list)
@@ -316,6 +317,8 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
                 continue
             patches.append(PatchFit(group[sub], base, shape, time.perf_counter() - t0))
     patches.sort(key=lambda p: -len(p.indices))
+    for r, p in enumerate(patches, 1):   # what was done to keep a trim valid (pinches, narrow necks)
+        skipped += [f"patch {r} trim: {note}" for note in p.shape.loops.notes]
     assigned = sum(len(p.indices) for p in patches)
     gaps = g0_gaps(points, patches, 5 * spacing)
     if share:

@@ -6,6 +6,14 @@ classified as an outer boundary (counter-clockwise) or a hole (clockwise, inside
 by closed 2-D B-spline pieces (split at corners) refined by knot insertion until they stay within the
 loop tolerance, so the trimmed
 surface is valid only where data was.
+
+The loops are valid trimming loops (`check_loops`: each simple, the holes inside the outer boundary and
+apart from it and from each other, on dense samples; `crossing_pairs`, a vectorised sweep). Where a region
+is a cell or two wide (a neck, a spike, a thin wall before a hole), contour vertices snapped to their
+nearest data points may land on or past each other, and a fit at the tolerance may cut across: such
+snaps are held back, and pieces whose fit would cross are fitted closer (as a last resort, as the contour
+polyline itself). A piece of data touching the face only at a cell corner (a pinch) is another component,
+left outside the trim. `TrimLoops.notes` says what was done.
 """
 from __future__ import annotations
 
@@ -15,7 +23,7 @@ import numpy as np
 from scipy import ndimage
 
 from rgm.errors import GeometryError
-from rgm.fitters.freeform import CurveFit, fit_curve
+from rgm.fitters.freeform import CurveFit, design_matrix, fit_curve
 
 # Marching-squares segments per case; corners are bit 1 = (i, j), 2 = (i, j+1), 4 = (i+1, j+1),
 # 8 = (i+1, j); edges 0 = top (i, j..j+1), 1 = right, 2 = bottom, 3 = left. Segments run with the
@@ -141,14 +149,131 @@ def loop_stats_max(loop: tuple[CurveFit, ...]) -> float:
     return max(piece.stats.max for piece in loop)
 
 
+# ------------------------------------------------------------------------------- validity of loops
+def _orient(p, q, r, eps):
+    """Sign (-1, 0, 1) of the turn p -> q -> r, 0 within `eps` (a cross product's scale)."""
+    c = (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+    return np.where(np.abs(c) <= eps, 0, np.sign(c))
+
+
+def crossing_pairs(loops, chunk: int = 1 << 21) -> np.ndarray:
+    """Pairs of edges of closed polygons `loops` (each (k, 2), the last vertex joined to the first) that
+    cross or touch, other than consecutive edges of one polygon (which share their vertex): (m, 4) rows
+    (loop a, edge a, loop b, edge b); edge e of a loop runs from its vertex e to vertex e + 1. A vectorised
+    sweep: edges sorted by their smallest x, each tested against those whose x-range starts within its
+    own, then by y-range and the four orientations (collinear overlaps and touching vertices count)."""
+    loops = [np.asarray(p, float) for p in loops]
+    if not loops:
+        return np.zeros((0, 4), int)
+    a = np.vstack(loops)
+    b = np.vstack([np.roll(p, -1, axis=0) for p in loops])
+    lid = np.concatenate([np.full(len(p), k) for k, p in enumerate(loops)])
+    sid = np.concatenate([np.arange(len(p)) for p in loops])
+    size = np.array([len(p) for p in loops])[lid]
+    scale = max(float(np.ptp(a, axis=0).max()), 1e-300)
+    eps = 1e-12 * scale * scale
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    order = np.argsort(lo[:, 0], kind="stable")
+    stop = np.searchsorted(lo[order, 0], hi[order, 0], side="right")   # sorted edges i+1 .. stop-1
+    count = np.maximum(stop - np.arange(len(a)) - 1, 0)
+    out = []
+    first = 0
+    while first < len(a):   # rows of sorted edges whose candidate pairs fit in one chunk
+        last = first + max(1, int(np.searchsorted(np.cumsum(count[first:]), chunk, side="right")))
+        rows = np.arange(first, min(last, len(a)))
+        first = rows[-1] + 1
+        n = count[rows]
+        if n.sum() == 0:
+            continue
+        i = np.repeat(rows, n)
+        j = i + 1 + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+        p, q = order[i], order[j]
+        keep = (lo[p, 1] <= hi[q, 1]) & (lo[q, 1] <= hi[p, 1])
+        gap = np.abs(sid[p] - sid[q])
+        keep &= ~((lid[p] == lid[q]) & ((gap == 1) | (gap == size[p] - 1)))
+        p, q = p[keep], q[keep]
+        hit = ((_orient(a[p], b[p], a[q], eps) * _orient(a[p], b[p], b[q], eps) <= 0)
+               & (_orient(a[q], b[q], a[p], eps) * _orient(a[q], b[q], b[p], eps) <= 0))
+        out.append(np.c_[lid[p][hit], sid[p][hit], lid[q][hit], sid[q][hit]])
+    return np.vstack(out) if out else np.zeros((0, 4), int)
+
+
+def is_simple(poly: np.ndarray) -> bool:
+    """Whether a closed polygon (k, 2) neither crosses nor touches itself."""
+    return len(crossing_pairs([_distinct(poly)])) == 0
+
+
+def _inside(point: np.ndarray, poly: np.ndarray) -> bool:
+    """Whether `point` (2,) lies inside the closed polygon (k, 2) (even-odd rule)."""
+    x, y = point
+    a, b = poly, np.roll(poly, -1, axis=0)
+    up = (a[:, 1] > y) != (b[:, 1] > y)
+    t = (y - a[up, 1]) / (b[up, 1] - a[up, 1])
+    return bool(np.sum(a[up, 0] + t * (b[up, 0] - a[up, 0]) > x) % 2)
+
+
+def _distinct(poly: np.ndarray) -> np.ndarray:
+    """A closed polygon without repeated consecutive vertices (nor a last vertex repeating the first)."""
+    poly = np.asarray(poly, float)
+    keep = np.any(poly != np.roll(poly, 1, axis=0), axis=1)
+    return poly[keep] if keep.any() else poly[:1]
+
+
+def _loop_problems(polys) -> tuple[list[tuple[int, int]], list[str]]:
+    """What makes closed polygons polys[0] (the outer boundary) and polys[1:] (its holes) invalid trimming
+    loops: (loop, edge) pairs involved in a crossing or touch, and what is wrong, in words. Valid: both
+    empty. A hole must lie inside the outer boundary and outside the other holes."""
+    bad, why = [], []
+    pairs = crossing_pairs(polys)
+    if len(pairs):
+        bad += [(int(la), int(ea)) for la, ea, _, _ in pairs] + [(int(lb), int(eb)) for _, _, lb, eb in pairs]
+        own = pairs[:, 0] == pairs[:, 2]
+        if own.any():
+            why.append(f"{int(own.sum())} crossings of loops with themselves")
+        if (~own).any():
+            why.append(f"{int((~own).sum())} crossings between loops")
+    for k, hole in enumerate(polys[1:], 1):
+        if len(pairs) and np.any((pairs[:, 0] == k) | (pairs[:, 2] == k)):
+            continue   # crossing: already said
+        if not _inside(hole[0], polys[0]) or any(_inside(hole[0], other) for m, other in enumerate(polys[1:], 1)
+                                                 if m != k):
+            bad += [(k, e) for e in range(len(hole))]
+            why.append(f"hole {k} outside the outer boundary or inside another hole")
+    return bad, why
+
+
+def loop_samples(loop: tuple[CurveFit, ...], per_ctrl: int = 16, min_per_piece: int = 64):
+    """Dense samples of a closed loop of pieces: points (m, 2) (each piece's last point, the next one's
+    first, given once; no point repeating the one before) and the piece each sample's outgoing edge
+    belongs to (m,). Each piece's first and last sample spans are subdivided geometrically (halved 8
+    times): at a sharp corner two pieces leave nearly along each other, and may cross just by it."""
+    pts, owner = [], []
+    for k, piece in enumerate(loop):
+        m = max(min_per_piece, per_ctrl * len(piece.ctrl))
+        end = 0.5 ** np.arange(8, 0, -1) / (m - 1)
+        t = np.unique(np.r_[np.linspace(0.0, 1.0, m), end, 1.0 - end])
+        pts.append((design_matrix(t, piece.knots, piece.degree) @ piece.ctrl)[:-1])
+        owner.append(np.full(len(t) - 1, k))
+    pts, owner = np.vstack(pts), np.concatenate(owner)
+    keep = np.any(pts != np.roll(pts, 1, axis=0), axis=1)   # no zero-length edges (a clamped piece)
+    return (pts[keep], owner[keep]) if keep.any() else (pts[:1], owner[:1])
+
+
+def check_loops(outer: tuple[CurveFit, ...], holes=()) -> list[str]:
+    """What is wrong with fitted trimming loops (dense samples of each): a loop crossing or touching
+    itself, two loops crossing, a hole outside the outer boundary or inside another. Empty: valid."""
+    return _loop_problems([loop_samples(loop)[0] for loop in (outer, *holes)])[1]
+
+
 @dataclass(frozen=True)
 class TrimLoops:
     """Closed loops of 2-D B-spline pieces in the surface's (u, v) domain: one outer boundary
-    (counter-clockwise) and its holes (clockwise)."""
+    (counter-clockwise) and its holes (clockwise); simple, holes inside the outer boundary and apart."""
 
     outer: tuple[CurveFit, ...]
     holes: tuple[tuple[CurveFit, ...], ...]
     dropped: int  # further outer components (separate pieces of data) not covered by this face
+    notes: tuple = ()   # what was done to keep the loops valid (said in the fit's notes)
 
 
 def _to_uv(poly_px, u_of_row, v_of_col):
@@ -158,15 +283,116 @@ def _to_uv(poly_px, u_of_row, v_of_col):
     return np.c_[np.interp(r, np.arange(rows), u_of_row), np.interp(c, np.arange(cols), v_of_col)]
 
 
+def _snapped(raw: list[np.ndarray], tree, rounds: int = 200) -> tuple[list[np.ndarray], int]:
+    """The polygons `raw` (the contours in (u, v), jointly valid) with each vertex moved to its nearest data
+    point, except where that makes the loops cross or touch (in a region a cell or two wide, vertices of
+    both sides may snap to the same point, or past each other): for each crossing or touching pair of
+    edges, the one of their vertices that moved farthest goes half-way back to its contour position (all
+    the way the second time), until none is left. Returns the polygons and how many vertices were held
+    back."""
+    near = [tree.data[tree.query(p)[1]] for p in raw]
+    moved = [np.linalg.norm(s - p, axis=1) for p, s in zip(raw, near)]
+    snap = [np.ones(len(p)) for p in raw]     # how far each vertex goes towards its data point
+    for _ in range(rounds):
+        polys, index = [], []
+        for p, s, flag in zip(raw, near, snap):
+            q = p + flag[:, None] * (s - p)
+            keep = np.any(q != np.roll(q, 1, axis=0), axis=1)
+            keep = keep if keep.any() else np.r_[True, np.zeros(len(q) - 1, bool)]
+            polys.append(q[keep])
+            index.append(np.nonzero(keep)[0])
+        pairs = crossing_pairs(polys)
+        if not len(pairs):
+            pairs = np.array([(k, e, k, e) for k, e in _loop_problems(polys)[0]]).reshape(-1, 4)
+        if not len(pairs):
+            return polys, int(sum((s < 1).sum() for s in snap))
+        reverted = set()
+        for la, ea, lb, eb in pairs:   # the raw vertices behind each edge's ends (merged ones included)
+            cand = []
+            for loop, edge in ((la, ea), (lb, eb)):
+                idx, n = index[loop], len(raw[loop])
+                a, b = idx[edge], idx[(edge + 1) % len(idx)]
+                span = np.arange(a, a + (b - a) % n + 1) % n if len(idx) > 1 else np.arange(n)
+                span = np.unique(np.r_[span, (a - 1) % n])     # a vertex merged into the edge's start
+                cand += [(snap[loop][v] * moved[loop][v], loop, v) for v in span if snap[loop][v] > 0]
+            if cand and not reverted.intersection((c[1], c[2]) for c in cand):
+                _, loop, v = max(cand)
+                snap[loop][v] = 0.5 if snap[loop][v] == 1 else 0.0
+                reverted.add((loop, v))
+        if not reverted:
+            break
+    return [_distinct(p) for p in raw], int(sum(len(p) for p in raw))
+
+
+def _stretches(uv: np.ndarray) -> list[np.ndarray]:
+    """A closed polygon (k, 2) cut at its corners (`corner_indices`) into open polylines, each from a
+    corner to the next (the last vertex of one the first of the next); one closed stretch if no corner."""
+    corners = corner_indices(uv)
+    if len(corners) == 0:
+        return [np.vstack([uv, uv[:1]])]
+    rolled = np.vstack([np.roll(uv, -corners[0], axis=0), uv[corners[0]]])
+    cuts = np.r_[corners - corners[0], len(uv)]
+    return [rolled[a:b + 1] for a, b in zip(cuts[:-1], cuts[1:])]
+
+
+def _polyline_piece(seg: np.ndarray, tol_uv: float) -> CurveFit:
+    """The stretch itself as a degree-1 B-spline (exact: residual 0)."""
+    from rgm.fitters.freeform import fit_stats
+
+    t = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(seg, axis=0), axis=1))]
+    t = t / t[-1]
+    return CurveFit(1, np.r_[0.0, t, 1.0], seg.copy(), fit_stats(np.zeros(len(seg)), tol_uv, "max"))
+
+
+def _fit_stretch(seg: np.ndarray, tol_uv: float, degree: int, lo, hi, exact: bool = False) -> CurveFit:
+    if exact or len(seg) < 3:
+        piece = _polyline_piece(seg, tol_uv)
+    else:
+        piece = fit_curve(_densify(seg), tol_uv, degree=min(degree, len(seg) - 1), fix_ends=True)
+    # the control polygon is clamped into the domain, so (convex hull) the loop stays inside it
+    return replace(piece, ctrl=np.clip(piece.ctrl, lo, hi))
+
+
+def _fit_valid(polys: list[np.ndarray], tol_uv: float, degree: int, lo, hi, rounds: int = 5):
+    """Loops of B-spline pieces through the jointly valid polygons `polys` (outer first), each piece within
+    `tol_uv`; where the fitted loops cross or touch (a fit cutting across a narrow neck or corner, a hole's
+    loop meeting the outer one) the pieces involved are fitted again to half the tolerance, up to `rounds`
+    times, and failing that are the polygon's stretch itself (degree 1), which cannot cross. Returns the
+    loops and the number of pieces tightened and of pieces made polylines."""
+    stretches = [_stretches(p) for p in polys]
+    tols = [np.full(len(s), tol_uv) for s in stretches]
+    loops = [[_fit_stretch(s, tol_uv, degree, lo, hi) for s in ss] for ss in stretches]
+    tightened, exact = set(), set()
+    for attempt in range(rounds + 1):
+        samples = [loop_samples(tuple(lp)) for lp in loops]
+        bad, _ = _loop_problems([pts for pts, _ in samples])
+        if not bad:
+            break
+        for loop, piece in {(lp, int(samples[lp][1][e])) for lp, e in bad}:
+            if attempt < rounds:
+                tols[loop][piece] /= 2
+                tightened.add((loop, piece))
+                loops[loop][piece] = _fit_stretch(stretches[loop][piece], tols[loop][piece], degree, lo, hi)
+            else:
+                exact.add((loop, piece))
+                loops[loop][piece] = _fit_stretch(stretches[loop][piece], tol_uv, degree, lo, hi, exact=True)
+    return [tuple(lp) for lp in loops], len(tightened - exact), len(exact)
+
+
 def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_pixels: int = 20,
                    degree: int = 3, snap_to=None) -> TrimLoops:
     """Fit the boundary of `mask` (rows, cols) with closed B-spline loops in (u, v).
 
     u_of_row (rows,), v_of_col (cols,): the parameters of the grid rows and columns.
     tol_uv: the loops' tolerance in parameter units (a model tolerance divided by the surface's speed).
-    Components smaller than `min_pixels` (speckle) are ignored; the largest component is the face.
+    Components smaller than `min_pixels` (speckle) are ignored; the largest component is the face (cells
+    touching it only at a cell corner are another component: pinched off, outside its trim, and said so).
     snap_to: optional data parameters (k, 2); each contour vertex then moves to its nearest data point,
-    so a rasterised boundary follows the data rather than the raster's staircase.
+    so a rasterised boundary follows the data rather than the raster's staircase (except where that would
+    make the loops cross or touch).
+
+    The loops are valid (`check_loops`): each simple, the holes inside the outer boundary and apart from it
+    and each other. Pieces whose fit would cross are fitted tighter (or as the contour itself); `notes` say so.
     """
     mask = np.asarray(mask, bool)
     lab, count = ndimage.label(mask)
@@ -181,26 +407,32 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
     areas = np.array([signed_area(p) for p in polys])
     outer_i = int(np.argmax(np.abs(areas)))
     outer_sign = np.sign(areas[outer_i])
+    notes = []
+    corner = ndimage.label(mask, structure=np.ones((3, 3)))[0]    # 8-connected: pinches join
+    pinched = np.setdiff1d(np.unique(lab[(corner == corner[component][0]) & ~component]), [0])
+    if len(pinched):
+        notes.append(f"{len(pinched)} piece(s) of data ({int(np.isin(lab, pinched).sum())} cells) touching the "
+                     f"face only at a cell corner (a pinch) are left outside its trim")
 
     lo = np.array([np.min(u_of_row), np.min(v_of_col)])
     hi = np.array([np.max(u_of_row), np.max(v_of_col)])
-    tree = None
+    u_of_row, v_of_col = np.asarray(u_of_row, float), np.asarray(v_of_col, float)
+    chosen = [polys[outer_i]] + [p for i, p in enumerate(polys) if i != outer_i and np.sign(areas[i]) != outer_sign]
+    raw = [_distinct(_to_uv(p, u_of_row, v_of_col)) for p in chosen]
     if snap_to is not None:
         from scipy.spatial import cKDTree
 
-        tree = cKDTree(np.asarray(snap_to, float))
-
-    def fit(poly, want_ccw):
-        uv = _to_uv(poly, np.asarray(u_of_row, float), np.asarray(v_of_col, float))
-        if tree is not None:
-            uv = tree.data[tree.query(uv)[1]]
-            uv = uv[np.r_[True, np.any(np.diff(uv, axis=0) != 0, axis=1)]]  # drop repeated vertices
-        if (signed_area(uv) > 0) != want_ccw:
-            uv = uv[::-1]
-        # the control polygon is clamped into the domain, so (convex hull) the loop stays inside it
-        return tuple(replace(piece, ctrl=np.clip(piece.ctrl, lo, hi)) for piece in fit_closed_loop(uv, tol_uv, degree))
-
-    outer = fit(polys[outer_i], True)
-    holes = tuple(fit(p, False) for i, p in enumerate(polys)
-                  if i != outer_i and np.sign(areas[i]) != outer_sign)
-    return TrimLoops(outer, holes, int(np.sum(sizes >= min_pixels)) - 1)
+        raw, kept = _snapped(raw, cKDTree(np.asarray(snap_to, float)))
+        if kept:
+            notes.append(f"{kept} contour vertices held back from their nearest data point (the loops would "
+                         f"cross or touch there: a region a cell or two wide)")
+    uv = [p if (signed_area(p) > 0) == (k == 0) else p[::-1] for k, p in enumerate(raw)]
+    loops, tightened, exact = _fit_valid(uv, tol_uv, degree, lo, hi)
+    if tightened or exact:
+        notes.append(f"{tightened + exact} trimming-loop piece(s) would cross a loop at the tolerance (a narrow "
+                     f"neck or sharp corner): fitted closer to the data boundary"
+                     + (f", {exact} of them as its contour polyline" if exact else ""))
+    problems = check_loops(loops[0], loops[1:])
+    if problems:
+        raise GeometryError(f"the trimming loops are not valid: {'; '.join(problems)}")
+    return TrimLoops(loops[0], tuple(loops[1:]), int(np.sum(sizes >= min_pixels)) - 1, tuple(notes))

@@ -1,5 +1,7 @@
 """Trimming loops from a data mask (issue 8): closed loops, outer counter-clockwise, holes clockwise,
-within tolerance of the mask's boundary."""
+within tolerance of the mask's boundary; valid (simple, holes inside and apart) on pinched, narrow regions."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -7,7 +9,8 @@ from hypothesis import strategies as st
 
 from rgm.errors import GeometryError
 from rgm.fitters.freeform import design_matrix
-from rgm.fitters.trimloops import fit_trim_loops, loop_stats_max, mask_contours, signed_area
+from rgm.fitters.trimloops import (check_loops, crossing_pairs, fit_trim_loops, is_simple, loop_stats_max,
+                                   mask_contours, signed_area)
 
 
 def loop_points(loop, m=500):
@@ -60,3 +63,85 @@ def test_disc_loop_follows_the_boundary():
 def test_empty_mask_is_refused():
     with pytest.raises(GeometryError, match="no valid cells"):
         fit_trim_loops(np.zeros((10, 10), bool), np.arange(10.0), np.arange(10.0), 0.1)
+
+
+def pinched_necked_mask(seed, bins=24, per_cell=3):
+    """An occupancy raster of scattered parameters like `fit_freeform`'s: two blocks joined by a neck one
+    cell wide, a spike one cell wide, a hole behind a wall one cell thick and a piece touching the face
+    only at a cell corner (a pinch); with `per_cell` random data parameters in each occupied cell."""
+    rng = np.random.default_rng(seed)
+    mask = np.zeros((bins, bins), bool)
+    mask[3:11, 3:21] = True
+    mask[15:21, 3:21] = True
+    mask[11:15, 11] = True          # the neck
+    mask[17:23, 2] = False
+    mask[20:23, 20] = True          # the spike
+    mask[4:8, 14:18] = False        # the hole, one cell from the outer boundary
+    mask[0:3, 21:24] = True         # the pinched piece: touches cell (3, 20) at its corner
+    ii, jj = np.nonzero(mask)
+    uv = (np.repeat(np.c_[ii, jj], per_cell, axis=0) + rng.random((len(ii) * per_cell, 2))) / bins
+    return mask, uv, (np.arange(bins) + 0.5) / bins
+
+
+def test_validity_check_finds_crossings_touches_and_stray_holes():
+    square = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    bowtie = np.array([[0, 0], [1, 1], [1, 0], [0, 1]], float)
+    assert is_simple(square) and not is_simple(bowtie)
+    assert not is_simple(np.array([[0, 0], [2, 0], [2, 2], [1, 0], [0, 2]], float))   # touches at a vertex
+    assert not is_simple(np.array([[0, 0], [2, 0], [1, 0], [1, 1]], float))           # runs back on itself
+    assert len(crossing_pairs([square, square * 0.5 + 0.25])) == 0                     # apart: fine
+    assert len(crossing_pairs([square, square + 0.5])) == 2                            # two loops crossing
+    phi = np.linspace(0, 2 * np.pi, 5000, endpoint=False)
+    dense = np.c_[np.cos(phi), np.sin(phi)]
+    assert is_simple(dense) and not is_simple(np.vstack([dense, [[0.5, 1.5], [0.5, -1.5]]]))
+
+
+@pytest.mark.parametrize("seed", [9, 10])   # the plain fit: its hole crosses the outer loop (9), itself (10)
+def test_a_pinched_narrow_necked_region_gets_valid_loops_where_the_plain_fit_crossed(seed):
+    """The loop construction as it was (contour vertices snapped to their nearest data points, the
+    polygon fitted at the tolerance, split at corners) crosses itself or its hole on these rasters: the neck,
+    spike and thin wall are a cell wide, the tolerance half a cell. fit_trim_loops now gives valid loops
+    (holding back snaps that would cross, fitting the pieces that would cross closer), within the
+    tolerance of its boundary polygon, and says what it did and that the pinched piece is left out."""
+    from scipy import ndimage
+    from scipy.spatial import cKDTree
+
+    from rgm.fitters.trimloops import _to_uv, fit_closed_loop, loop_samples
+
+    mask, uv, rows = pinched_necked_mask(seed)
+    tol = 0.02
+    lab = ndimage.label(mask)[0]
+    face = lab == np.bincount(lab.ravel())[1:].argmax() + 1
+    tree = cKDTree(uv)
+    plain = []
+    for k, poly in enumerate(sorted(mask_contours(face), key=lambda p: -abs(signed_area(p)))):
+        snapped = tree.data[tree.query(_to_uv(poly, rows, rows))[1]]
+        snapped = snapped[np.r_[True, np.any(np.diff(snapped, axis=0) != 0, axis=1)]]
+        if (signed_area(snapped) > 0) != (k == 0):
+            snapped = snapped[::-1]
+        # control points clamped into the domain, as it was
+        plain.append(tuple(replace(c, ctrl=np.clip(c.ctrl, rows[0], rows[-1])) for c in fit_closed_loop(snapped, tol)))
+    assert len(plain) == 2   # outer boundary and the hole
+    before = check_loops(plain[0], plain[1:])
+    assert any(("between loops" if seed == 9 else "with themselves") in w for w in before)
+
+    loops = fit_trim_loops(mask, rows, rows, tol, snap_to=uv)
+    assert check_loops(loops.outer, loops.holes) == [] and len(loops.holes) == 1
+    assert signed_area(loop_points(loops.outer)) > 0 and signed_area(loop_points(loops.holes[0])) < 0
+    assert any("pinch" in n for n in loops.notes) and any("closer" in n or "held back" in n for n in loops.notes)
+    # within the tolerance of the boundary polygon it follows: the contour with vertices moved at most to
+    # their data points (each less than a cell diagonal away)
+    for loop, poly in zip((loops.outer, *loops.holes), sorted(mask_contours(face), key=lambda p: -abs(signed_area(p)))):
+        assert loop_stats_max(loop) <= tol
+        contour = _to_uv(poly, rows, rows)
+        pts = loop_samples(loop)[0]
+        assert cKDTree(contour).query(pts)[0].max() <= tol + np.sqrt(2) / 24
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), tol=st.sampled_from([0.005, 0.01, 0.02, 0.04]))
+def test_trim_loops_are_always_valid(seed, tol):
+    mask, uv, rows = pinched_necked_mask(seed)
+    loops = fit_trim_loops(mask, rows, rows, tol, snap_to=uv)
+    assert check_loops(loops.outer, loops.holes) == []
+    assert len(fit_trim_loops(mask, rows, rows, tol).holes) == 1   # unsnapped (a range image's mask) too
