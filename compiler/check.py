@@ -507,6 +507,6 @@ def _check(program: A.Program, params: dict[str, str] | None) -> CheckResult:
     tolerance = None
     if tol is not None and tol.value.unit not in ("deg", "rad") and tol.value.value > 0:
         tolerance = to_model(tol.value.value, tol.value.unit, res.units)
-    types = dict(checker.types)
+    types = checker.types      # the checker's own table (nothing else keeps it), not a copy
     return CheckResult(sort_and_dedupe(res.diagnostics + checker.diags), types, res.order, res.fns, res.bindings, res.overrides,
                        res.exports, res.units, tolerance)

@@ -120,7 +120,7 @@ class FastLALR:
             if len(cache) > _SHAPE_CACHE:
                 cache.clear()
         shapes = self.shapes[0]
-        toks: list[Tok] = []     # the kept tokens of the statement being read
+        toks: list[tuple] = []   # the kept tokens of the statement being read (Tok's fields, as a tuple)
         shape: list[str] = []    # the kinds of all its tokens (keyword spellings as themselves)
         keep, note = toks.append, shape.append
         pos, line, bol = 0, 1, 0           # offset after the last token, its line, where that line begins
@@ -138,7 +138,7 @@ class FastLALR:
                     if "\n" in value:
                         line += value.count("\n")
                         bol = start + value.rindex("\n") + 1
-                    tok = _tuple_new(Tok, (kind, value, start, pos, first_line, col, line, pos - bol + 1))
+                    tok = (kind, value, start, pos, first_line, col, line, pos - bol + 1)
                 else:
                     pos = start + len(value)
                     known = kinds.get(value)
@@ -148,9 +148,9 @@ class FastLALR:
                     if role is _DROPPED:
                         note(key)
                         continue
-                    tok = _tuple_new(Tok, (kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1))
+                    tok = (kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1)
                     if role is _COMMENT:
-                        on_comment(tok)
+                        on_comment(_tuple_new(Tok, tok))
                         continue
                     if role is _ERROR:
                         return False
@@ -271,11 +271,11 @@ class _Direct:
     def __init__(self, toks: list, methods: dict):
         self.toks, self.methods = toks, methods
 
-    def token(self, k: int, kind: str):
-        return self.toks[k]
+    def token(self, k: int, kind: str) -> Tok:
+        return _tuple_new(Tok, self.toks[k])
 
     def retype(self, k: int, kind: str) -> None:
-        self.toks[k] = self.toks[k]._replace(type=kind)
+        self.toks[k] = (kind, *self.toks[k][1:])
 
     def node(self, method: str, children: list):
         return self.methods[method](children)
@@ -303,10 +303,12 @@ class Code:
 class _Source:
     """Writes what the table does as Python source, `def build(t): ...` over the kept tokens `t`, and
     compiles it: one line per reduction, in the order the reductions ran, so the builder calls run in
-    the same order. Every kept token is unpacked once at the top (`_, v3, s3, e3, l3, c3, m3, d3 =
-    t[3]`: value, start, end, line, col, end line, end col). A reduction is written by `inliner.emit`
-    when it has a template for it (the builder's work written out in place: no call, no children list),
-    else as a call of the builder method. A function Python cannot compile is left to `fallback`."""
+    the same order. The tokens come as plain tuples of Tok's fields (a builder method called as such
+    gets a Tok, `Tok_(t[3])`); every kept token is unpacked once at the top (`_, v3, s3, e3, l3, c3,
+    m3, d3 = t[3]`: value, start, end, line, col, end line, end col). A reduction is written by
+    `inliner.emit` when it has a template for it (the builder's work written out in place: no call, no
+    children list), else as a call of the builder method. A function Python cannot compile is left to
+    `fallback`."""
 
     def __init__(self, methods: dict, fallback, inliner=None):
         self.methods, self.fallback, self.inliner = methods, fallback, inliner
@@ -316,10 +318,10 @@ class _Source:
 
     def token(self, k: int, kind: str) -> Code:
         self.count = max(self.count, k + 1)
-        return Code(f"t[{k}]", kind, k, (f"l{k}", f"c{k}", f"s{k}", f"m{k}", f"d{k}", f"e{k}"))
+        return Code(f"Tok_(t[{k}])", kind, k, (f"l{k}", f"c{k}", f"s{k}", f"m{k}", f"d{k}", f"e{k}"))
 
     def retype(self, k: int, kind: str) -> None:
-        self.lines.append(f"t[{k}] = t[{k}]._replace(type={kind!r})")
+        self.lines.append(f"t[{k}] = ({kind!r}, *t[{k}][1:])")
 
     def var(self) -> str:
         self.fresh += 1
@@ -344,6 +346,7 @@ class _Source:
         body = head + self.lines + [c.src for c in built if isinstance(c, Code) and c.tok is None and not c.src.isidentifier()]
         source = "def build(t):\n" + "".join(f"    {line}\n" for line in body or ["pass"])
         namespace = dict(self.methods)
+        namespace["Tok_"] = functools.partial(_tuple_new, Tok)
         if self.inliner is not None:
             namespace.update(self.inliner.namespace)
         try:

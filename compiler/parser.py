@@ -101,18 +101,18 @@ def _maker(cls):
     and nodes are most of the objects a parse creates."""
     names = [f.name for f in fields(cls)]
     assert not any(n.endswith("_") for n in names)
-    source = (f"def make({', '.join(names)}):\n    made_ = new_(twin_)\n"   # no field ends with `_`
+    source = (f"def make({', '.join(names)}):\n    made_ = twin_()\n"   # no field ends with `_`
               + "".join(f"    made_.{n} = {n}\n" for n in names)
               + "    made_.__class__ = cls_\n    return made_\n")
-    namespace = {"new_": object.__new__, "twin_": _twin(cls), "cls_": cls}
+    namespace = {"twin_": _twin(cls), "cls_": cls}
     exec(source, namespace)
     return namespace["make"]
 
 
 _SPAN, _NUMBER, _STRING, _NAME, _CALL, _LIST, _BINOP, _NEG, _MEMBER, _NET = map(_maker, (
     Span, A.Number, A.String, A.Name, A.Call, A.ListExpr, A.BinOp, A.Neg, A.Member, A.Net))
-_TYPEREF, _PARAM, _ANNOTATION, _UNITS, _TOLERANCE, _BINDING, _FNDEF, _EXPORT = map(_maker, (
-    A.TypeRef, A.Param, A.Annotation, A.Units, A.Tolerance, A.Binding, A.FnDef, A.Export))
+_TYPEREF, _PARAM, _ANNOTATION, _UNITS, _TOLERANCE, _BINDING, _FNDEF, _EXPORT, _COMMENT = map(_maker, (
+    A.TypeRef, A.Param, A.Annotation, A.Units, A.Tolerance, A.Binding, A.FnDef, A.Export, A.Comment))
 
 
 def _read_number(text: str) -> tuple[float, str | None, bool]:
@@ -302,7 +302,7 @@ class _Inliner:
                 A.Annotation, A.Binding, A.Export)
 
     def __init__(self, builder: _Builder):
-        self.namespace = {"B_": builder, "new_": object.__new__, "NUMS_get": _NUMBERS.get, "unescape_": _unescape}
+        self.namespace = {"B_": builder, "NUMS_get": _NUMBERS.get, "unescape_": _unescape}
         self.fields = {}
         for cls in self._CLASSES:
             self.namespace["C_" + cls.__name__] = cls
@@ -317,7 +317,7 @@ class _Inliner:
     def new(self, out, cls: str, values: list[str], indent: str = "", var: str | None = None) -> str:
         """`var = <a cls with these field values, in field order>` (made as `_maker` makes it)."""
         var = var or out.var()
-        out.lines.append(f"{indent}{var} = new_(T_{cls})")
+        out.lines.append(f"{indent}{var} = T_{cls}()")
         out.lines += [f"{indent}{var}.{k} = {v}" for k, v in zip(self.fields[cls], values, strict=True)]
         out.lines.append(f"{indent}{var}.__class__ = C_{cls}")
         return var
@@ -335,7 +335,7 @@ class _Inliner:
     def t_number(self, out, c):
         tok = c[0]
         k, var = tok.tok, out.var()
-        out.lines += [f"k_ = NUMS_get(v{k})", "if k_ is None:", f"    {var} = number([t[{k}]])", "else:"]
+        out.lines += [f"k_ = NUMS_get(v{k})", "if k_ is None:", f"    {var} = number([{tok.src}])", "else:"]
         sp = self.span(out, tok, tok, "    ")
         self.new(out, "Number", ["k_[0]", "k_[1]", "k_[2]", sp], "    ", var)
         return Code(var, "Number", None, tok.span)
@@ -666,8 +666,8 @@ class _Run:
                           key=lambda t: t.start_pos)
         stmts, end_comments = _attach_comments(self.text, self.statements, comments)
         return A.Program(tuple(stmts), tuple(end_comments),
-                         tuple(A.Comment(t.value.rstrip(), Span(self.filename, t.line, t.col, t.end_line,
-                                                               t.end_col, t.start_pos, t.end_pos))
+                         tuple(_COMMENT(t.value.rstrip(), _SPAN(self.filename, t.line, t.col, t.end_line,
+                                                                t.end_col, t.start_pos, t.end_pos))
                                for t in comments),
                          frozenset(self.broken), self.span(0, len(self.text)))
 
@@ -677,10 +677,10 @@ def _restater(cls):
     frozen, slotted class `cls`, made as `_maker` makes nodes (no generated __init__)."""
     names = [f.name for f in fields(cls)]
     changed = {"leading": "leading", "trailing": "trailing", "blank_before": "blank"}
-    source = ("def restate(stmt, leading, trailing, blank):\n    made_ = new_(twin_)\n"
+    source = ("def restate(stmt, leading, trailing, blank):\n    made_ = twin_()\n"
               + "".join(f"    made_.{n} = {changed.get(n, 'stmt.' + n)}\n" for n in names)
               + "    made_.__class__ = cls_\n    return made_\n")
-    namespace = {"new_": object.__new__, "twin_": _twin(cls), "cls_": cls}
+    namespace = {"twin_": _twin(cls), "cls_": cls}
     exec(source, namespace)
     return namespace["restate"]
 

@@ -149,20 +149,25 @@ class _Resolver:
     def references(self) -> None:
         no_scope: frozenset[str] = frozenset()
         for name, stmt in {**self.r.bindings, **self.r.fns}.items():
-            scope = {p.name for p in stmt.params} if isinstance(stmt, A.FnDef) else no_scope
             deps: list[tuple[str, A.Name]] = []
-            for ann in stmt.annotations:
-                for _key, expr in ann.args:
-                    self.visit(expr, no_scope, None, deps)
-            self.visit(stmt.body if isinstance(stmt, A.FnDef) else stmt.expr, scope,
-                       name if scope else None, deps)
+            if isinstance(stmt, A.FnDef):
+                scope = {p.name for p in stmt.params}
+                for ann in stmt.annotations:
+                    for _key, expr in ann.args:
+                        self.visit(expr, no_scope, None, deps)
+                self.visit(stmt.body, scope, name if scope else None, deps)
+            else:     # a binding's annotation values, then its expression: one walk, in that order
+                roots = [expr for ann in stmt.annotations for _key, expr in ann.args] if stmt.annotations else []
+                roots.append(stmt.expr)
+                self.visit(roots, no_scope, None, deps, many=True)
             self.r.deps[name] = deps
 
-    def visit(self, expr, scope, fn: str | None, deps) -> None:
-        """Every name in `expr`: calls to `callee`, values to `value_name` (the common cases, a builtin
-        call and a binding's name, are settled inline: a file holds many of them)."""
+    def visit(self, expr, scope, fn: str | None, deps, many: bool = False) -> None:
+        """Every name in `expr` (with `many`, in each expression of the list `expr`, one after the
+        other): calls to `callee`, values to `value_name` (the common cases, a builtin call and a
+        binding's name, are settled inline: a file holds many of them)."""
         bindings, fns = self.r.bindings, self.r.fns
-        stack = [expr]
+        stack = expr[::-1] if many else [expr]
         while stack:
             node = stack.pop()
             kind = type(node)

@@ -201,27 +201,30 @@ class Folder:
     def fold(self, expr, local: frozenset = frozenset()):
         if self.types.get(id(expr)) is ANY:
             return None
-        if isinstance(expr, A.Number):
+        cls = expr.__class__     # the node classes have no subclasses: `is` tests, most common first
+        if cls is A.Number:
             return to_model(expr.value, expr.unit, self.units)
-        if isinstance(expr, A.String):
+        if cls is A.String:
             return expr.value
-        if isinstance(expr, A.Name):
+        if cls is A.Name:
             return None if expr.id in local else self.binding(expr.id)
-        if isinstance(expr, A.ListExpr):
+        if cls is A.ListExpr:
             return tuple(self.fold(e, local) for e in expr.items)
-        if isinstance(expr, A.Net):
+        if cls is A.Net:
             return expr
-        if isinstance(expr, A.Neg):
+        if cls is A.Call:
+            return self.call(expr, local)
+        if cls is A.Neg:
             v = self.fold(expr.operand, local)
             return -v if isinstance(v, float) else None
-        if isinstance(expr, A.BinOp):
+        if cls is A.BinOp:
             a, b = self.fold(expr.left, local), self.fold(expr.right, local)
             if not (isinstance(a, float) and isinstance(b, float)):
                 return None
             if expr.op == "/":
                 return a / b if b != 0 else None
             return {"+": a + b, "-": a - b, "*": a * b}[expr.op]
-        if isinstance(expr, A.Member):
+        if cls is A.Member:
             obj = self.fold(expr.obj, local)
             if isinstance(obj, Point):
                 if expr.attr == "length" and obj.kind == "vec":
@@ -230,8 +233,6 @@ class Folder:
                 attr = {"x": "u", "y": "v"}.get(expr.attr, expr.attr) if obj.kind == "uv" else expr.attr
                 return obj.coords[names.index(attr)] if attr in names else None
             return None
-        if isinstance(expr, A.Call):
-            return self.call(expr, local)
         return None
 
     def call(self, call, local):
