@@ -55,6 +55,7 @@ _NO_LOCALS: frozenset = frozenset()
 _ANGLE_UNITS = ("deg", "rad")
 _BINARY: dict = {}      # (op, left, right) -> T.binary(op, left, right)
 _EXPORTABLE: dict = {}  # type -> T.accepts(T.EXPORTABLE, type)
+_NEGATED: dict = {}     # type -> T.unary("-", type)
 _NO_ENV: dict = {}      # the (never written) environment outside fns
 #: recursion limit for a second attempt on very deep expressions (about 4 frames per level)
 DEEP_LIMIT = 100_000
@@ -254,7 +255,9 @@ class _Checker:
 
     def neg(self, expr: A.Neg, env) -> T.Type:
         operand = self.infer(expr.operand, env)
-        t = T.unary("-", operand)
+        t = _NEGATED.get(operand, _NEGATED)
+        if t is _NEGATED:        # T.unary of an interned type, worked out once per type
+            t = _NEGATED[operand] = T.unary("-", operand)
         if t is None:
             self.diags.append(error("E0306", f"cannot negate {T.describe(operand)}", expr.span,
                                     f"this is {T.describe(operand)}", [ARITHMETIC]))
@@ -298,8 +301,9 @@ class _Checker:
 
     # ------------------------------------------------------------------------------------ calls
     def call(self, call: A.Call, env) -> T.Type:
-        arg_types = tuple([self.infer(e, env) for e in call.args])
-        kw_types = tuple([(k, self.infer(e, env)) for k, e in call.kwargs])
+        infer = self.infer
+        arg_types = tuple([infer(e, env) for e in call.args])
+        kw_types = tuple([(k, infer(e, env)) for k, e in call.kwargs]) if call.kwargs else ()
         name = call.func.id
         user = name in self.res.fns
         builtin = None if user else FUNCTIONS.get(name)

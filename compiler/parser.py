@@ -86,7 +86,7 @@ def parse(text: str | bytes, filename: str = "<input>", *, fast: bool = True
 def _twin(cls):
     """A plain class with the slots of the frozen, slotted dataclass `cls`: an instance of it, its
     slots set by ordinary assignment, becomes a `cls` by `__class__` assignment (allowed between
-    classes of the same layout). Three times as fast as the generated __init__, whose every field
+    classes of the same layout). Several times as fast as the generated __init__, whose every field
     goes through `object.__setattr__` past the frozen __setattr__; the result is the same object."""
     names = tuple(f.name for f in fields(cls))
     assert cls.__slots__ == names, cls
