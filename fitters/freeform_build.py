@@ -71,6 +71,7 @@ def _grid_patches(points, idx, grid, tol, statistic, min_pixels) -> FreeformPart
             continue
         out.shapes.append(shape)
         out.info.append(_describe(shape, "range grid", m.sum(), time.perf_counter() - t0))
+        out.notes += [f"patch {len(out.shapes)} trim: {note}" for note in shape.loops.notes]
     left = int(mask.sum() - sum(m.sum() for m in masks))
     if left:
         out.notes.append(f"{left} pixels at depth jumps and creases (or in specks) belong to no patch")
