@@ -107,6 +107,11 @@ def _spacing(tree: cKDTree, n_sample: int = 1000) -> float:
     return float(np.median(tree.query(pts, k=2)[0][:, 1]))
 
 
+#: first-stage correspondences are approximate nearest neighbours, within (1 + APPROX) of the nearest
+#: distance (Greenspan & Yurick 2003): the stage only brings the pose near; the final one is exact
+APPROX = 1.0
+
+
 def _workers(n: int) -> int:
     """cKDTree workers for a query of n points: all cores from a few thousand points on (below, starting
     the threads costs more than they save)."""
@@ -135,7 +140,7 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
     efficiency for less pull from the rim of the overlap).
     """
     source = np.asarray(source, float)
-    tree = tree or cKDTree(target)
+    tree = tree or cKDTree(target, balanced_tree=False)   # sliding midpoint: builds ~30 % faster, queries as fast
     T = np.eye(4) if init is None else np.array(init, float)
     spacing = _spacing(tree) if spacing is None else spacing
     min_dist = 3 * spacing if min_dist is None else min_dist
@@ -158,7 +163,7 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
     while it < max_iter:
         it += 1
         p = src @ T[:3, :3].T + T[:3, 3]
-        dist, j = tree.query(p, distance_upper_bound=max_dist, workers=_workers(len(p)))
+        dist, j = tree.query(p, distance_upper_bound=max_dist, workers=_workers(len(p)), eps=0.0 if full else APPROX)
         hit = np.flatnonzero(np.isfinite(dist))
         j, n = j[hit], target_normals[j[hit]]
         if src_n is not None:                                       # compatible normals only
