@@ -28,7 +28,7 @@ import numpy as np
 
 from rgm.errors import BackendError
 
-from .mesh_cdt import OnSegment, constrained_delaunay, inside_loops
+from .mesh_cdt import Incremental, OnSegment, constrained_delaunay, inside_loops
 from .mesh_edges import CERTIFY, Edges, segment_distance
 from .mesh_faces import collect_faces
 
@@ -108,6 +108,7 @@ class _FaceMesher:
         self.face, self.edges, self.piece_ids = face, edges, piece_ids
         self.tol, self.angle_tol = tol, angle_tol
         self.requests = set()
+        self.qhull = Incremental()
         self._boundary()
         gu, gv = face.grid
         uu, vv = np.meshgrid(gu[1:-1], gv[1:-1], indexing="ij")
@@ -140,6 +141,7 @@ class _FaceMesher:
         self.seg_ref = refs                                    # per segment: (group, rep index)
         self.versions = self.edges.version.copy()
         self.certified = np.zeros(0, np.int64)                 # keys of triangles measured within tol
+        self.qhull.reset()                                     # the boundary points changed
 
     def refresh(self):
         """Take up the current edge sampling (after this face or a neighbour split a shared edge)."""
@@ -184,10 +186,11 @@ class _FaceMesher:
             uv = np.concatenate([self.b_uv, self.interior])
             p = self.scaled(uv)
             try:
-                tri = constrained_delaunay(p, self.segments, self.loops, n_fixed=nb)
+                tri = constrained_delaunay(p, self.segments, self.loops, n_fixed=nb, state=self.qhull)
             except OnSegment as exc:   # free points on a boundary segment: leave them out
                 self.interior = np.delete(self.interior, exc.ids - nb, axis=0)
                 self.certified = np.zeros(0, np.int64)
+                self.qhull.reset()
                 continue
             xyz = np.concatenate([self.edges.coords()[self.b_ids],
                                   patch.evaluate(self.interior[:, 0], self.interior[:, 1])])

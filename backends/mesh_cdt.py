@@ -196,7 +196,51 @@ def _regions_inside(p, tri, constrained, n_real, polygons):
     return keep[label]
 
 
-def constrained_delaunay(points, segments, loops, n_fixed=None) -> np.ndarray:
+class Incremental:
+    """Qhull's triangulation kept between calls of `constrained_delaunay` on a growing point set: a call
+    whose points extend the previous call's (same prefix, inside the same bounding box) adds only the
+    new points to it (Qhull's incremental mode) instead of triangulating from scratch. `reset()` when
+    the points change otherwise."""
+
+    def __init__(self):
+        self.reset()
+
+    def reset(self):
+        self.dt, self.n, self.box = None, 0, None
+
+
+def _qhull(p, n_fixed, state):
+    """(points with the four ghost corners first (n + 4, 2), Qhull's simplices in those indices)."""
+    from scipy.spatial import Delaunay
+
+    n = len(p)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    if state is not None and state.dt is not None and state.n <= n and \
+            (lo >= state.box[0]).all() and (hi <= state.box[1]).all():
+        if n > state.n:
+            state.dt.add_points(p[state.n:])
+        dt, ghosts = state.dt, state.ghosts
+    else:
+        scale = float(np.max(hi - lo)) or 1.0
+        pad = 4 * scale
+        ghosts = np.array([[lo[0] - pad, lo[1] - pad], [hi[0] + pad, lo[1] - pad],
+                           [hi[0] + pad, hi[1] + pad], [lo[0] - pad, hi[1] + pad]])
+        dt = Delaunay(np.concatenate([ghosts, p]), incremental=state is not None)
+        if state is not None:
+            state.dt, state.box, state.ghosts = dt, (lo, hi), ghosts
+    if state is not None:
+        state.n = n
+    if len(dt.coplanar):
+        dropped = np.unique(dt.coplanar[:, 0]) - 4
+        if state is not None:
+            state.reset()
+        if (dropped >= n_fixed).all():
+            raise OnSegment(dropped)
+        raise BackendError("coincident boundary points in a face's parameter domain")
+    return ghosts, dt.simplices
+
+
+def constrained_delaunay(points, segments, loops, n_fixed=None, state: Incremental | None = None) -> np.ndarray:
     """Triangles (t, 3) int64, counter-clockwise, of the region inside `loops` (even-odd), with every
     segment as an edge.
 
@@ -204,26 +248,18 @@ def constrained_delaunay(points, segments, loops, n_fixed=None) -> np.ndarray:
              points that may be dropped. segments : (s, 2) point indices that must be edges.
     loops : list of (m,) index arrays, each a closed loop of points (first not repeated).
     Raises `OnSegment` (with the free points' indices) when free points lie on a segment, and
-    BackendError when loops cross or touch.
+    BackendError when loops cross or touch. `state` (an `Incremental`) keeps Qhull's triangulation for
+    the next call on these points plus more.
     """
-    from scipy.spatial import Delaunay
-
     p = np.asarray(points, float)
     n = len(p)
     n_fixed = n if n_fixed is None else n_fixed
-    lo, hi = p.min(axis=0), p.max(axis=0)
-    scale = float(np.max(hi - lo)) or 1.0
-    pad = 4 * scale
-    ghosts = np.array([[lo[0] - pad, lo[1] - pad], [hi[0] + pad, lo[1] - pad],
-                       [hi[0] + pad, hi[1] + pad], [lo[0] - pad, hi[1] + pad]])
+    ghosts, simplices = _qhull(p, n_fixed, state)
+    scale = float(np.max(p.max(axis=0) - p.min(axis=0))) or 1.0
     allp = np.concatenate([p, ghosts])
-    dt = Delaunay(allp)
-    if len(dt.coplanar):
-        dropped = np.unique(dt.coplanar[:, 0])
-        if (dropped >= n_fixed).all():
-            raise OnSegment(dropped)
-        raise BackendError("coincident boundary points in a face's parameter domain")
-    tri = _remove_flat(allp, _ccw(allp, dt.simplices.astype(np.int64)), scale)
+    simplices = simplices.astype(np.int64) - 4          # Qhull's order: ghosts first; here: ghosts last
+    simplices[simplices < 0] += n + 4
+    tri = _remove_flat(allp, _ccw(allp, simplices), scale)
     seg = np.asarray(segments, np.int64)
     m = len(allp)
     constrained = np.unique(_pair_keys(seg, m))

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings, strategies as st
 
-from rgm.backends.mesh_cdt import OnSegment, constrained_delaunay
+from rgm.backends.mesh_cdt import Incremental, OnSegment, constrained_delaunay
 from rgm.errors import BackendError
 
 
@@ -83,3 +83,31 @@ def test_free_point_on_a_segment_is_reported_and_crossing_loops_refused():
     with pytest.raises(BackendError, match="cross"):
         constrained_delaunay(crossing, np.concatenate([closed_segments(0, 4), closed_segments(4, 4)]),
                              [np.arange(4), 4 + np.arange(4)])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_incremental_triangulation_of_a_growing_point_set(seed):
+    """The mesher's passes add free points to the same boundary: with an `Incremental` state Qhull adds
+    them to the previous triangulation; every result still covers the region with every segment kept."""
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(8, 40))
+    ang = 2 * np.pi * (np.arange(k) + rng.uniform(-0.3, 0.3, k)) / k
+    outer = np.column_stack([np.cos(ang), np.sin(ang)]) * rng.uniform(0.8, 1.0, (k, 1))
+    g = np.linspace(-1, 1, int(rng.integers(3, 12)))
+    points = np.concatenate([outer, np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2) * 0.5])
+    segments = closed_segments(0, k)
+    state = Incremental()
+    for _ in range(4):
+        try:
+            tri = constrained_delaunay(points, segments, [np.arange(k)], n_fixed=k, state=state)
+        except OnSegment as exc:
+            points = np.delete(points, exc.ids, axis=0)
+            state.reset()
+            continue
+        check_cover(points, tri, segments, signed_area(outer))
+        fresh = constrained_delaunay(points, segments, [np.arange(k)], n_fixed=k)
+        assert len(fresh) == len(tri)
+        r = np.sqrt(rng.uniform(0, 0.5, int(rng.integers(1, 30))))
+        t = rng.uniform(0, 2 * np.pi, len(r))
+        points = np.concatenate([points, np.column_stack([r * np.cos(t), r * np.sin(t)])])

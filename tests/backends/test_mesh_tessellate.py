@@ -56,6 +56,31 @@ def test_random_surface_within_tolerance(seed, tol):
     assert measured_deviation(vertices, triangles, nurbs) <= tol
 
 
+@settings(max_examples=25, deadline=None, database=None)
+@given(seed=st.integers(0, 10_000), degree=st.integers(1, 5))
+def test_power_form_evaluator_agrees_with_the_geometry_evaluator(seed, degree):
+    """The patches evaluate B-splines from per-span power forms: points and first partials agree with
+    rgm.geometry's evaluation (rational or not, at span ends and inside) to rounding."""
+    from rgm.backends.mesh_surface import RevolutionPatch
+
+    nurbs = random_surface(seed, n=degree + 3, degree=degree)
+    patch = NurbsPatch(nurbs)
+    assert patch.power is not None
+    rng = np.random.default_rng(seed)
+    u = np.concatenate([rng.uniform(0, 1, 200), np.unique(nurbs.knots_u)])
+    v = np.concatenate([rng.uniform(0, 1, 200), np.unique(nurbs.knots_v)[::-1]])
+    d = nurbs.derivatives(u, v, 1)
+    for got, want in zip(patch.d1(u, v), (d[0, 0], d[1, 0], d[0, 1])):
+        assert np.abs(got - want).max() <= 1e-11 * (1 + np.abs(want).max())
+    assert np.abs(patch.evaluate(u, v) - nurbs.evaluate(u, v)).max() <= 1e-11 * 10
+    profile = BSplineCurve(NurbsCurve(degree, np.concatenate([np.zeros(degree + 1), [0.3, 0.6], np.ones(degree + 1)]),
+                                      rng.uniform(1, 5, (degree + 3, 3)), rng.uniform(0.5, 2, degree + 3)))
+    rev = RevolutionPatch(Revolution(profile, [0, 0, 0], [0, 0, 1]))
+    c = profile.nurbs().derivatives(v, 1)
+    pts, du, dv = rev.d1(np.zeros_like(v), v)
+    assert np.abs(pts - c[0]).max() <= 1e-11 * 10 and np.abs(dv - c[1]).max() <= 1e-11 * (1 + np.abs(c[1]).max())
+
+
 def test_deviation_agrees_with_geometry_point_inversion():
     nurbs = random_surface(281)
     vertices, triangles = tessellate(BSplineSurface(nurbs), 0.1)
