@@ -84,19 +84,41 @@ class FastLALR:
         order = _ORDER + tuple(rest)
         # any other character is an _ERROR token, so nothing is passed over silently
         alternatives = [terms[n].pattern.to_regexp() for n in order] + [f"(?!{_BLANK})."]
-        # one C call splits the text into (blanks, net, token) triples (trailing blanks simply end it):
-        # a net (the first alternative) has a group of its own, so that its kind needs no look-up ...
+        # punctuation that no rule keeps (`(`, `,`, `:`, `.`) needs no token object
+        kept = {sym.name for rule in frontend.callbacks for sym in rule.expansion
+                if sym.is_term and not sym.filter_out}
+        self.dropped = frozenset(n for n in terms if n not in kept and n not in ("COMMENT", "WS"))
+        # ... and most of it is read with the blanks before a token, as its *gap* (`, `, `(`, `: `):
+        # a gap's spelling tells its dropped tokens' kinds and its newlines (`gaps`, `learn_gap`). A
+        # character that starts another token stays a token of its own (`.`: `.5`), or is read
+        # only where the other token does not follow (`:` but not `:=`)
+        spelled = [str(t.pattern.value) for t in terms.values() if t.pattern.type == "str"]
+        self.gap_kinds = {}
+        simple, guarded = [], []       # gap characters, and those read only before something else
+        for n in sorted(self.dropped):
+            c = str(terms[n].pattern.value) if terms[n].pattern.type == "str" else ""
+            patterns = [terms[m].pattern.to_regexp() for m in terms if terms[m].pattern.type != "str"]
+            if len(c) != 1 or any(re.match(a, c + probe) for a in patterns for probe in "0a_\" "):
+                continue           # not a single character, or one that starts a number, a name, ...
+            longer = [t[1:] for t in spelled if len(t) > 1 and t[0] == c]
+            if longer:
+                guarded.append(re.escape(c) + f"(?!{'|'.join(map(re.escape, longer))})")
+            else:
+                simple.append(re.escape(c))
+            self.gap_kinds[c] = n
+        run = f"[{_BLANK[1:-1]}{''.join(simple)}]*+"
+        gap = run + (f"(?:(?:{'|'.join(guarded)}){run})*+" if guarded else "")
+        # one C call splits the text into (gap, net, token) triples (trailing gaps simply end it; the
+        # caller checks what is left): a net (the first alternative) has a group of its own, so that
+        # its kind needs no look-up ...
         others = "|".join(f"(?:{a})" for a in alternatives[1:])
-        self.splitter = re.compile(f"({_BLANK}*)(?:({alternatives[0]})|({others}))", re.DOTALL)
+        self.splitter = re.compile(f"({gap})(?:({alternatives[0]})|({others}))", re.DOTALL)
         # ... and any other token's kind is found once per distinct spelling: the first alternative
         # that matches it whole is the one that matched it in the text (terminals have no lookahead)
         self.classify = re.compile("|".join(f"(?P<{n}>{a})" for n, a in zip(order + ("_ERROR",), alternatives)),
                                    re.DOTALL).fullmatch
         self.kinds: dict[str, tuple[str, str, str]] = {}   # spelling -> `learn(spelling)`
-        # punctuation that no rule keeps (`(`, `,`, `:`, `.`) needs no token object
-        kept = {sym.name for rule in frontend.callbacks for sym in rule.expansion
-                if sym.is_term and not sym.filter_out}
-        self.dropped = frozenset(n for n in terms if n not in kept and n not in ("COMMENT", "WS"))
+        self.gaps: dict[str, tuple] = {}                   # gap spelling -> `learn_gap(spelling)`
         rules = {rule: _Rule(rule) for rule in frontend.callbacks}
         # state -> {symbol: shift/goto target (int) | the rule to reduce}
         self.actions = [None] * (max(self.states) + 1)
@@ -112,7 +134,7 @@ class FastLALR:
     def parse(self, text: str, on_comment) -> bool:
         """Parse `text`, calling the builder as lark would; False at the first error (nothing is
         undone: the caller discards what was built and re-parses with lark). Lines and columns are
-        counted along the way: only blanks and nets can hold a newline."""
+        counted along the way: only gaps and nets can hold a newline."""
         kinds = self.kinds
         if len(kinds) > _KIND_CACHE:
             kinds.clear()
@@ -120,17 +142,29 @@ class FastLALR:
             if len(cache) > _SHAPE_CACHE:
                 cache.clear()
         shapes = self.shapes[0]
+        gaps = self.gaps
+        if len(gaps) > _KIND_CACHE:
+            gaps.clear()
         toks: list[tuple] = []   # the kept tokens of the statement being read (Tok's fields, as a tuple)
         shape: list[str] = []    # the kinds of all its tokens (keyword spellings as themselves)
-        keep, note = toks.append, shape.append
+        keep, note, note_gap = toks.append, shape.append, shape.extend
         pos, line, bol = 0, 1, 0           # offset after the last token, its line, where that line begins
         findall = self.splitter.findall
         for _, end in _pieces(text):
-            for blank, net, value in findall(text, pos, end):
-                start = pos + len(blank)
-                if "\n" in blank:
-                    line += blank.count("\n")
-                    bol = start - len(blank) + blank.rindex("\n") + 1
+            for gap, net, value in findall(text, pos, end):
+                if gap:
+                    known = gaps.get(gap)
+                    if known is None:
+                        known = gaps[gap] = self.learn_gap(gap)
+                    dropped, newlines, tail = known
+                    start = pos + len(gap)
+                    if dropped:
+                        note_gap(dropped)
+                    if newlines:
+                        line += newlines
+                        bol = start - tail
+                else:
+                    start = pos
                 if net:
                     value, kind, key, role = net, "NET", "NET", _KEPT
                     pos = start + len(value)
@@ -145,36 +179,48 @@ class FastLALR:
                     if known is None:
                         known = kinds[value] = self.learn(value)
                     kind, key, role = known
-                    if role is _DROPPED:
-                        note(key)
+                    if role is not _KEPT:
+                        if role is _DROPPED:
+                            note(key)
+                            continue
+                        if role is _COMMENT:
+                            on_comment(_tuple_new(Tok, (kind, value, start, pos, line, start - bol + 1, line,
+                                                        pos - bol + 1)))
+                            continue
+                        if role is _ERROR:
+                            return False
+                        keep((kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1))
+                        note(key)       # the `;` that ends the statement
+                        key = tuple(shape)
+                        build = shapes.get(key, 0)
+                        if type(build) is int:     # built `build` times: run the table, compile once it repeats
+                            first = shapes is self.shapes[0]
+                            if build < _COMPILE_AFTER:
+                                if not self.direct(key, first, toks):
+                                    return False
+                                shapes[key] = build + 1
+                                build = None
+                            else:              # a shape that has built statements: it compiles
+                                direct = functools.partial(self.direct, key, first)
+                                build = shapes[key] = self.run(key, first, _Source(self.methods, direct, self.inliner))
+                        if build is not None:
+                            build(toks)
+                        shapes = self.shapes[1]
+                        toks.clear()     # nothing keeps the lists: the next statement reuses them
+                        shape.clear()
                         continue
                     tok = (kind, value, start, pos, line, start - bol + 1, line, pos - bol + 1)
-                    if role is _COMMENT:
-                        on_comment(_tuple_new(Tok, tok))
-                        continue
-                    if role is _ERROR:
-                        return False
                 keep(tok)
                 note(key)
-                if role is _END:
-                    key = tuple(shape)
-                    build = shapes.get(key, 0)
-                    if type(build) is int:     # built `build` times: run the table, compile once it repeats
-                        first = shapes is self.shapes[0]
-                        if build < _COMPILE_AFTER:
-                            if not self.direct(key, first, toks):
-                                return False
-                            shapes[key] = build + 1
-                            build = None
-                        else:              # a shape that has built statements: it compiles
-                            direct = functools.partial(self.direct, key, first)
-                            build = shapes[key] = self.run(key, first, _Source(self.methods, direct, self.inliner))
-                    if build is not None:
-                        build(toks)
-                    shapes = self.shapes[1]
-                    toks.clear()     # nothing keeps the lists: the next statement reuses them
-                    shape.clear()
-        return not shape                   # text after the last `;` is an unfinished statement
+        # text after the last `;` is an unfinished statement, and so is punctuation after the last
+        # token (a gap that no token follows is not matched)
+        return not shape and not text[pos:].strip(" \t\f\r\n")
+
+    def learn_gap(self, gap: str) -> tuple[tuple[str, ...], int, int]:
+        """(the kinds of the dropped tokens in a gap, its newlines, the characters after the last)."""
+        newlines = gap.count("\n")
+        return (tuple(self.gap_kinds[c] for c in gap if c in self.gap_kinds), newlines,
+                len(gap) - gap.rindex("\n") - 1 if newlines else 0)
 
     def learn(self, value: str) -> tuple[str, str, str]:
         """(kind, shape key, role) of a token spelling: the key is the kind, or the spelling itself

@@ -233,11 +233,23 @@ class _Resolver:
         """Tarjan's strongly connected components over bindings and fns; a component of several nodes
         (or a node using itself) is a cycle. Components come out dependencies first, which is the order."""
         deps_of = self.r.deps
+        source_order = list(deps_of)
+        rank = {n: i for i, n in enumerate(source_order)}
+        for i, name in enumerate(source_order):
+            for dep, _ref in deps_of[name]:
+                if rank[dep] >= i:
+                    break
+            else:
+                continue
+            break
+        else:   # every name uses only names before it (most files): no cycle, and the order is the source's
+            bindings = self.r.bindings
+            self.r.order += [n for n in source_order if n in bindings]
+            return
         index: dict[str, int] = {}
         low: dict[str, int] = {}
         on_stack: set[str] = set()
         stack: list[str] = []
-        source_order = list(deps_of)
         components: list[list[str]] = []
 
         for root in source_order:
@@ -279,7 +291,6 @@ class _Resolver:
                         if top == node:
                             break
                     components.append(comp)
-        rank = {n: i for i, n in enumerate(source_order)}
         bindings, order = self.r.bindings, self.r.order
         for comp in components:
             first = comp[0]

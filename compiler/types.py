@@ -263,7 +263,7 @@ def describe(t: Type) -> str:
     if t == NONE:
         return "nothing"
     if t.kind == "list":
-        return f"an empty list" if t.args[0] == ANY else f"a list of {t.args[0]}"
+        return "an empty list" if t.args[0] == ANY else f"a list of {t.args[0]}"
     if t.kind == "union":
         opts = [describe(o) for o in t.args]
         return ", ".join(opts[:-1]) + " or " + opts[-1]

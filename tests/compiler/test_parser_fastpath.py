@@ -90,3 +90,40 @@ def test_gc_pause_restores_the_collector():
         assert not gc.isenabled()       # a caller that had it off keeps it off
     finally:
         gc.enable()
+
+
+@pytest.mark.parametrize("text", [
+    "a := 1;\n(", "a := 1; ,", "a := 1;\n:\n", "a := 1;(  \n  ", "a := f(\n", "a := 1; # c\n,",
+    "a := f(  ,\n  :x);", "a := f(x\n  : 1,\n(2));", "a :\n= 1;", "a ::= 1;", "a := f(,(", "a := pt(1,2,3)\n,,\n",
+])
+def test_punctuation_read_with_the_blanks(text):
+    """`(`, `,` and `:` are read by the fast lexer with the blanks before a token (a gap); a gap that
+    no token follows (at the end of the file) is still an error, and the result is lark's."""
+    fast, d1 = parse(text, "g.rgm")
+    slow, d2 = parse(text, "g.rgm", fast=False)
+    assert d1 == d2
+    assert fast == slow and _spans(fast) == _spans(slow)
+
+
+def test_gaps_and_newlines_across_pieces():
+    """Gaps holding newlines and dropped punctuation on both sides of the lexer's 64 KB cuts: the same
+    lines and columns as lark's loop."""
+    stmt = "v{i} := f(\n    a,\n  (b)  ,\n  c: (1),\n);  # n{i}\n"
+    text = "".join(stmt.format(i=i) for i in range(2 * lalr._PIECE // len(stmt) + 50))
+    fast, d1 = parse(text, "h.rgm")
+    slow, d2 = parse(text, "h.rgm", fast=False)
+    assert d1 == d2
+    assert _spans(fast) == _spans(slow)
+    assert [c.span for c in fast.comments] == [c.span for c in slow.comments]
+
+
+@pytest.mark.parametrize("text, order", [
+    ("a := 1; b := a + 1; c := b * a;", ["a", "b", "c"]),             # only earlier names: the source order
+    ("c := b * a; b := a + 1; a := 1;", ["a", "b", "c"]),             # later names: dependencies first
+    ("a := 1; fn f(x: num) := x + a; b := f(2); c := b;", ["a", "b", "c"]),
+    ("a := 1; b := f(2); fn f(x: num) := x + a; c := b;", ["a", "b", "c"]),
+    ("a := b; b := a; c := 1;", ["c"]),                                # a cycle (E0103) is left out
+])
+def test_evaluation_order(text, order):
+    program, _ = parse(text, "o.rgm")
+    assert check(program).order == order
