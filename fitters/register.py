@@ -115,7 +115,7 @@ APPROX = 1.0
 def _workers(n: int) -> int:
     """cKDTree workers for a query of n points: all cores from a few thousand points on (below, starting
     the threads costs more than they save)."""
-    return -1 if n > 5000 else 1
+    return -1 if n > 2000 else 1
 
 
 def icp(source, target, target_normals, init=None, *, source_normals=None, target_weights=None,
