@@ -121,7 +121,7 @@ def _workers(n: int) -> int:
 def icp(source, target, target_normals, init=None, *, source_normals=None, target_weights=None,
         tree: cKDTree | None = None, spacing: float | None = None, max_dist: float | None = None,
         min_dist: float | None = None, max_iter: int = 60, tol: float = 1e-5, sample: int = 4000,
-        final_sample: int = 16000, kernel: float = 3.0, seed: int = 0) -> IcpResult:
+        final_sample: int = 10000, kernel: float = 3.0, seed: int = 0) -> IcpResult:
     """Robust point-to-plane ICP of source (n, 3) onto target (m, 3) with unit normals (m, 3).
 
     init : (4, 4) initial source-to-target transform; source_normals : (n, 3), if given, matches whose
