@@ -7,6 +7,8 @@ plus vectorised closest points (the oracle for chordal deviation).
 - a `Plane` by its plane coordinates over a given box;
 - every other surface (and every surface carrying trimming curves, which live in rgm's (u, v)) by its
   exact `.nurbs()` form.
+NURBS patches and revolution profiles are evaluated in per-span power form
+(`rgm.geometry.power_form`: a span lookup and Horner steps, for the many small calls of refinement).
 
 `Patch.project(points, uv0)` is Gauss-Newton on |S(u, v) - X|^2 from a starting guess (Piegl & Tiller
 §6.1, point inversion), clamped to the domain; `Patch.closest(points)` first picks the nearest node of a
@@ -16,6 +18,8 @@ surface (within the grid spacing of it).
 from __future__ import annotations
 
 import numpy as np
+
+from rgm.geometry.power_form import power_form
 
 
 class Patch:
@@ -126,7 +130,7 @@ class NurbsPatch(Patch):
         self.breaks_v = np.unique(nurbs.knots_v[nurbs.degree_v:len(nurbs.knots_v) - nurbs.degree_v])
         self.creases_u = _creases(nurbs.knots_u, nurbs.degree_u)
         self.creases_v = _creases(nurbs.knots_v, nurbs.degree_v)
-        self.power = _power_form(nurbs, True)
+        self.power = power_form(nurbs)
 
     def d1(self, u, v):
         if self.power is not None:
@@ -155,7 +159,7 @@ class RevolutionPatch(Patch):
         self.breaks_u = np.array([rev.start, rev.end])
         self.breaks_v = np.unique(p.knots[p.degree:len(p.knots) - p.degree])
         self.creases_v = _creases(p.knots, p.degree)
-        self.power = _power_form(p, False)
+        self.power = power_form(p)
 
     def _profile(self, v, order):
         v = np.clip(np.asarray(v, float), *self.domain[1])
@@ -204,144 +208,3 @@ def surface_patch(surface, trimmed: bool, plane_box=None) -> Patch:
     if isinstance(surface, Revolution) and not trimmed:
         return RevolutionPatch(surface)
     return NurbsPatch(surface.nurbs())
-
-
-# --- per-span power form: the mesher's fast evaluator ---------------------------------------------
-
-#: highest degree converted to the per-span power form (the Vandermonde solve stays well conditioned)
-_POWER_MAX_DEGREE = 7
-#: parameter pairs per block of the power-form evaluator (the gathered coefficients stay in cache)
-_POWER_CHUNK = 4096
-
-
-def _span_matrices(knots, degree):
-    """(breaks (s+1,), M (s, p+1, p+1)): on non-empty span k the basis functions N_{span-p+r} are
-    sum_a M[k, r, a] x^a with x = (t - breaks[k]) / (breaks[k+1] - breaks[k]); spans (s,) knot indices."""
-    from rgm.geometry.basis import basis_functions_t
-
-    p = degree
-    knots = np.asarray(knots, float)
-    lo, hi = knots[p], knots[len(knots) - p - 1]
-    breaks = np.unique(knots[(knots >= lo) & (knots <= hi)])
-    spans = np.searchsorted(knots, breaks[:-1], side="right") - 1
-    x = np.linspace(0.0, 1.0, p + 1)
-    vander_inv = np.linalg.inv(np.vander(x, p + 1, increasing=True))        # values at x -> coefficients
-    t = breaks[:-1, None] + np.diff(breaks)[:, None] * x[None, :]            # (s, p+1)
-    values = basis_functions_t(knots, p, t.ravel(), np.repeat(spans, p + 1))  # (p+1 functions, s*(p+1))
-    values = values.reshape(p + 1, len(spans), p + 1).transpose(1, 0, 2)     # (s, r, node)
-    return breaks, np.einsum("srn,an->sra", values, vander_inv), spans
-
-
-def _locate(breaks, t):
-    """(span (m,), local x (m,), 1 / span length (m,)) of parameters t clipped into [breaks[0], breaks[-1]]."""
-    t = np.clip(t, breaks[0], breaks[-1])
-    k = np.clip(np.searchsorted(breaks, t, side="right") - 1, 0, len(breaks) - 2)
-    inv = 1.0 / (breaks[k + 1] - breaks[k])
-    return k, (t - breaks[k]) * inv, inv
-
-
-def _powers(x, p, derivative):
-    """(m, p+1) powers x^a, and with `derivative` also their derivatives a x^(a-1)."""
-    pw = np.empty((len(x), p + 1))
-    pw[:, 0] = 1.0
-    for a in range(1, p + 1):
-        pw[:, a] = pw[:, a - 1] * x
-    if not derivative:
-        return pw, None
-    d = np.zeros_like(pw)
-    d[:, 1:] = pw[:, :-1] * np.arange(1, p + 1)
-    return pw, d
-
-
-class _CurvePower:
-    """A NurbsCurve in per-span power form over its homogeneous coordinates."""
-
-    def __init__(self, curve):
-        self.p = curve.degree
-        self.breaks, m, spans = _span_matrices(curve.knots, curve.degree)
-        win = curve.homogeneous[spans[:, None] - self.p + np.arange(self.p + 1)[None, :]]   # (s, r, c)
-        self.nc = win.shape[-1]
-        self.flat = np.ascontiguousarray(np.einsum("sra,src->sac", m, win).reshape(len(spans), -1))
-        self.rational = curve.is_rational
-
-    def d(self, t, order):
-        """Points (m, d) and, for order 1, first derivatives (m, d)."""
-        k, x, inv = _locate(self.breaks, np.asarray(t, float))
-        pw, dp = _powers(x, self.p, order > 0)
-        c = self.flat.take(k, axis=0).reshape(len(k), self.p + 1, self.nc)        # (m, a, c)
-        h = np.einsum("ma,mac->mc", pw, c)
-        pt = h[:, :-1] / h[:, -1:] if self.rational else h[:, :-1]
-        if not order:
-            return pt, None
-        hd = np.einsum("ma,mac->mc", dp, c) * inv[:, None]
-        if self.rational:
-            return pt, (hd[:, :-1] - hd[:, -1:] * pt) / h[:, -1:]
-        return pt, hd[:, :-1]
-
-
-class _SurfacePower:
-    """A NurbsSurface in per-span-pair power form over its homogeneous coordinates."""
-
-    def __init__(self, surface):
-        p, q = self.p, self.q = surface.degree_u, surface.degree_v
-        self.bu, mu, su = _span_matrices(surface.knots_u, p)
-        self.bv, mv, sv = _span_matrices(surface.knots_v, q)
-        pw = surface.homogeneous                                             # (nu, nv, 4)
-        iu = su[:, None] - p + np.arange(p + 1)[None, :]
-        iv = sv[:, None] - q + np.arange(q + 1)[None, :]
-        win = pw[iu[:, None, :, None], iv[None, :, None, :]]                 # (su, sv, r, s, 4)
-        coef = np.einsum("ira,jsb,ijrsc->ijabc", mu, mv, win)               # (su, sv, a, b, 4)
-        self.rational = surface.is_rational
-        if not self.rational:
-            coef = coef[..., :3]
-        self.nsv = len(sv)
-        self.nc = coef.shape[-1]
-        self.flat = np.ascontiguousarray(coef.reshape(len(su) * len(sv), -1))   # per span pair: (a, b, c)
-
-    def d(self, u, v, order):
-        """Points (m, 3) and, for order 1, the partials Su, Sv (m, 3) (blocks of _POWER_CHUNK)."""
-        u, v = np.asarray(u, float), np.asarray(v, float)
-        if len(u) <= _POWER_CHUNK:
-            return self._block(u, v, order)
-        parts = [self._block(u[s:s + _POWER_CHUNK], v[s:s + _POWER_CHUNK], order)
-                 for s in range(0, len(u), _POWER_CHUNK)]
-        return tuple(None if parts[0][i] is None else np.concatenate([b[i] for b in parts]) for i in range(3))
-
-    def _block(self, u, v, order):
-        ku, xu, iu = _locate(self.bu, u)
-        kv, xv, iv = _locate(self.bv, v)
-        p, q = self.p, self.q
-        c = self.flat.take(ku * self.nsv + kv, axis=0).reshape(len(u), p + 1, q + 1, self.nc)   # (m, a, b, c)
-        xu2, xv2 = xu[:, None, None], xv[:, None]
-        row = c[:, p]                                                        # Horner in u: (m, b, c)
-        for a in range(p - 1, -1, -1):
-            row = row * xu2 + c[:, a]
-        h = row[:, q]
-        for b in range(q - 1, -1, -1):
-            h = h * xv2 + row[:, b]
-        pt = h[:, :3] / h[:, 3:] if self.rational else h
-        if not order:
-            return pt, None, None
-        drow = c[:, p] * p                                                   # d/du by Horner
-        for a in range(p - 1, 0, -1):
-            drow = drow * xu2 + c[:, a] * a
-        hu = drow[:, q]
-        hv = row[:, q] * q
-        for b in range(q - 1, -1, -1):
-            hu = hu * xv2 + drow[:, b]
-            if b:
-                hv = hv * xv2 + row[:, b] * b
-        hu = hu * iu[:, None]
-        hv = hv * iv[:, None]
-        if self.rational:
-            w = h[:, 3:]
-            return pt, (hu[:, :3] - hu[:, 3:] * pt) / w, (hv[:, :3] - hv[:, 3:] * pt) / w
-        return pt, hu, hv
-
-
-def _power_form(obj, surface):
-    """The power form of a NurbsSurface (surface=True) or NurbsCurve, or None above _POWER_MAX_DEGREE."""
-    degrees = (obj.degree_u, obj.degree_v) if surface else (obj.degree,)
-    if max(degrees) > _POWER_MAX_DEGREE:
-        return None
-    return _SurfacePower(obj) if surface else _CurvePower(obj)
