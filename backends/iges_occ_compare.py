@@ -224,22 +224,31 @@ def _edge_samples(edge, face, count: int):
 
 
 def _cover(points_mm, edges, face, candidates: int = 2) -> np.ndarray:
-    """(k,) distance (mm) of points to the nearest of `edges` (on `face`: surface ∘ pcurve): Extrema_ExtPC
-    and the end points, on the `candidates` edges nearest by 33 samples each."""
+    """(k,) distance (mm) of points to the nearest of `edges` (on `face`: surface ∘ pcurve): the least of
+    the end points, Extrema_ExtPC's extrema and a local search (Extrema_LocateExtPC) from the nearest of
+    33 samples, on the `candidates` edges nearest by those samples. The local search is needed: on a
+    looping rational curve Extrema_ExtPC can miss the minimum of a point lying on the curve (0.48 mm
+    instead of 1e-15 on a 10 mm cubic)."""
     from OCP.BRepAdaptor import BRepAdaptor_Curve
-    from OCP.Extrema import Extrema_ExtPC
+    from OCP.Extrema import Extrema_ExtPC, Extrema_LocateExtPC
     from OCP.gp import gp_Pnt
 
     curves = [BRepAdaptor_Curve(e, face) if face is not None else BRepAdaptor_Curve(e) for e in edges]
-    polys = [_xyz(c.Value(x) for x in np.linspace(c.FirstParameter(), c.LastParameter(), 33)) for c in curves]
-    coarse = np.stack([np.linalg.norm(points_mm[:, None] - q[None], axis=2).min(axis=1) for q in polys])
+    params = [np.linspace(c.FirstParameter(), c.LastParameter(), 33) for c in curves]
+    polys = [_xyz(c.Value(x) for x in t) for c, t in zip(curves, params)]
+    near = np.stack([np.linalg.norm(points_mm[:, None] - q[None], axis=2) for q in polys])   # (edges, k, 33)
+    coarse = near.min(axis=2)
     best = np.full(len(points_mm), np.inf)
     for i, p in enumerate(points_mm):
+        point = gp_Pnt(*p)
         for k in np.argsort(coarse[:, i])[:candidates]:
             d = min(np.linalg.norm(polys[k][[0, -1]] - p, axis=1))
-            ext = Extrema_ExtPC(gp_Pnt(*p), curves[k], 1e-12)
+            ext = Extrema_ExtPC(point, curves[k], 1e-12)
             if ext.IsDone() and ext.NbExt():
                 d = min(d, min(ext.SquareDistance(j) for j in range(1, ext.NbExt() + 1)) ** 0.5)
+            local = Extrema_LocateExtPC(point, curves[k], float(params[k][np.argmin(near[k, i])]), 1e-12)
+            if local.IsDone():
+                d = min(d, local.SquareDistance() ** 0.5)
             best[i] = min(best[i], d)
     return best
 
