@@ -22,7 +22,7 @@ SETTINGS = settings(max_examples=20, deadline=None, suppress_health_check=[Healt
 COLOURS = st.one_of(st.none(), st.tuples(*[st.integers(0, 100).map(float)] * 3))
 
 
-def _round_trip(model, path, **options):
+def _assert_round_trip(model, path, **options):
     """Write `model`, read it back with rgm (the same model) and with OpenCASCADE (the same geometry)."""
     write_iges(model, path, **options)
     back = read_iges(path.read_text())
@@ -37,7 +37,7 @@ def _round_trip(model, path, **options):
 @SETTINGS
 @given(model=models(), colour=COLOURS)
 def test_model_iges_model_is_identical_and_opencascade_agrees(tmp_path, model, colour):
-    _round_trip(model, tmp_path / "m.igs", color=colour)
+    _assert_round_trip(model, tmp_path / "m.igs", color=colour)
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -46,7 +46,7 @@ def test_every_kind_round_trips(tmp_path, kind, seed):
     """Each kind on its own (the hypothesis draws mix them), in mm and inches."""
     rng = np.random.default_rng(seed)
     obj = make_object(kind, rng, "x", 1e-3)
-    _round_trip(Model(("mm", "in")[seed], 1e-3, {"x": obj}, ("x",)), tmp_path / "k.igs")
+    _assert_round_trip(Model(("mm", "in")[seed], 1e-3, {"x": obj}, ("x",)), tmp_path / "k.igs")
 
 
 @settings(max_examples=10, deadline=None)
