@@ -46,8 +46,14 @@ def _lattice(steps: int):
 
 #: samples per triangle: the 6-step barycentric lattice without the corners (15 on the edges, 10 inside)
 _BARY, _EDGE_OF_SAMPLE = _lattice(6)
-#: the edge midpoints and the centroid: measured first, since a failing triangle fails there mostly
-_COARSE = np.flatnonzero((np.isclose(_BARY, 0.5).sum(axis=1) == 2) | np.isclose(_BARY, 1 / 3).all(axis=1))
+#: the samples on the edges, and for each its step (1..5, in sixths) from the edge's first corner k
+#: (edge k runs from corner k to corner k + 1, whose weight that is)
+_ON_EDGE = np.flatnonzero(_EDGE_OF_SAMPLE >= 0)
+_STEP = np.rint(6 * _BARY[_ON_EDGE, (_EDGE_OF_SAMPLE[_ON_EDGE] + 1) % 3]).astype(int)
+#: the centroid, measured first with the edge midpoints (a failing triangle fails there mostly), and
+#: the other samples inside
+_CENTROID = int(np.flatnonzero(np.isclose(_BARY, 1 / 3).all(axis=1))[0])
+_INNER = np.flatnonzero((_EDGE_OF_SAMPLE < 0) & (np.arange(len(_BARY)) != _CENTROID))
 _EDGES = np.array([(0, 1), (1, 2), (2, 0)])
 #: initial grid points nearer than this to the boundary (in grid cells) are left out: no slivers
 CLEARANCE = 0.3
@@ -202,7 +208,7 @@ class _FaceMesher:
             todo = ~np.isin(key, self.certified)
             fail = np.zeros(len(tri), bool)
             worst = np.zeros(len(tri), int)
-            fail[todo], worst[todo] = self._measure(xyz[tri[todo]], uv[tri[todo]])
+            fail[todo], worst[todo] = self._measure(tri[todo], xyz, uv)
             self.certified = np.union1d(self.certified, key[todo & ~fail])
             if not fail.any():
                 self.tri_local, self.xyz, self.uv = tri, xyz, uv
@@ -244,13 +250,11 @@ class _FaceMesher:
         at[normal] = 0.5 * (uv[a[normal]] + uv[b[normal]])
         return at[~on_boundary]
 
-    def _deviation(self, v, uvt, samples):
-        """Upper bounds (t, k) of the distance to the surface of barycentric `samples` (k, 3) of triangles
-        v (t, 3, 3): the surface point at the interpolated (u, v), then Gauss-Newton closest points (one
+    def _deviation(self, x, guess):
+        """Upper bounds (k,) of the distance to the surface of points x (k, 3) with parameter guesses
+        guess (k, 2) (modified): the surface point at the guess, then Gauss-Newton closest points (one
         step, then two more) where that bound exceeds the limit."""
         patch, limit = self.face.patch, CERTIFY * self.tol
-        x = np.einsum("sk,tkd->tsd", samples, v).reshape(-1, 3)
-        guess = np.einsum("sk,tkd->tsd", samples, uvt).reshape(-1, 2)
         dist = np.linalg.norm(x - patch.evaluate(guess[:, 0], guess[:, 1]), axis=1)
         for iterations in (1, 2):
             rows = np.flatnonzero(dist > limit)
@@ -258,26 +262,54 @@ class _FaceMesher:
                 break
             guess[rows], d = patch.project(x[rows], guess[rows], iterations=iterations)
             dist[rows] = np.minimum(dist[rows], d)
-        return dist.reshape(len(v), len(samples))
+        return dist
 
-    def _measure(self, v, uvt):
-        """(failing (t,), worst (t,)) of triangles v (t, 3, 3) with corner parameters uvt (t, 3, 2): worst
-        is the lattice sample of largest deviation, or -1 - k when only the normal fails and edge k
+    def _measure(self, tri, xyz, uv):
+        """(failing (t,), worst (t,)) of triangles tri (t, 3) (local ids into xyz (n, 3) and uv (n, 2)):
+        worst is the lattice sample of largest deviation, or -1 - k when only the normal fails and edge k
         (the longest) should be split. The edge midpoints and centroid are measured first; only the
-        triangles they pass are measured on the whole lattice."""
+        triangles they pass are measured on the whole lattice. A lattice sample on an edge is a sample
+        of that edge, so it is measured once for the two triangles sharing the edge (an edge sample is
+        the same point and guess from either side)."""
         limit = CERTIFY * self.tol
-        dist = np.zeros((len(v), len(_BARY)))
-        dist[:, _COARSE] = self._deviation(v, uvt, _BARY[_COARSE])
-        full = np.flatnonzero((dist[:, _COARSE] <= limit).all(axis=1))
+        n = len(xyz)
+        a, b = tri, tri[:, [1, 2, 0]]                                  # edge k runs from corner k to k + 1
+        keys, eid = np.unique((np.minimum(a, b) * n + np.maximum(a, b)).ravel(), return_inverse=True)
+        eid = eid.reshape(-1, 3)
+        lo, hi = keys // n, keys % n
+        k = _EDGE_OF_SAMPLE[_ON_EDGE]
+        slot = eid[:, k] * 5 + np.where(a[:, k] < b[:, k], _STEP - 1, 5 - _STEP)   # (t, 15) into (e, 5)
+
+        def along(edges, steps):   # deviation (len(edges), len(steps)) at steps / 6 from lo to hi
+            w = np.asarray(steps, float)[None, :, None] / 6
+            x = (1 - w) * xyz[lo[edges], None] + w * xyz[hi[edges], None]
+            g = (1 - w) * uv[lo[edges], None] + w * uv[hi[edges], None]
+            return self._deviation(x.reshape(-1, 3), g.reshape(-1, 2)).reshape(len(edges), len(steps))
+
+        def inside(rows, samples):   # deviation (len(rows), len(samples)) at barycentric samples
+            x = np.einsum("sk,tkd->tsd", samples, xyz[tri[rows]]).reshape(-1, 3)
+            g = np.einsum("sk,tkd->tsd", samples, uv[tri[rows]]).reshape(-1, 2)
+            return self._deviation(x, g).reshape(len(rows), len(samples))
+
+        on_edge = np.zeros((len(keys), 5))
+        on_edge[:, 2] = along(np.arange(len(keys)), [3])[:, 0]
+        dist = np.zeros((len(tri), len(_BARY)))
+        dist[:, _CENTROID] = inside(np.arange(len(tri)), _BARY[[_CENTROID]])[:, 0]
+        dist[:, _ON_EDGE] = on_edge.ravel()[slot]
+        full = np.flatnonzero((dist <= limit).all(axis=1))             # only the coarse samples are set
         if len(full):
-            dist[full] = self._deviation(v[full], uvt[full], _BARY)
+            edges = np.unique(eid[full])
+            on_edge[edges[:, None], [0, 1, 3, 4]] = along(edges, [1, 2, 4, 5])
+            dist[full[:, None], _ON_EDGE] = on_edge.ravel()[slot[full]]
+            dist[full[:, None], _INNER] = inside(full, _BARY[_INNER])
         fail, worst = (dist > limit).any(axis=1), np.argmax(dist, axis=1)
         if self.angle_tol:
-            n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-            n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+            v, uvt = xyz[tri], uv[tri]
+            nrm = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+            nrm /= np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-300)
             ns = self.face.patch.normal(uvt[..., 0].ravel(), uvt[..., 1].ravel()).reshape(-1, 3, 3)
             valid = np.linalg.norm(ns, axis=2) > 0
-            cos = np.einsum("td,tkd->tk", n, ns)
+            cos = np.einsum("td,tkd->tk", nrm, ns)
             bent = (valid & (cos < np.cos(self.angle_tol))).any(axis=1) & ~fail
             longest = np.argmax(np.linalg.norm(v[:, [1, 2, 0]] - v, axis=2), axis=1)
             worst[bent] = -1 - longest[bent]

@@ -38,25 +38,44 @@ def _span_matrices(knots, degree):
     return breaks, np.einsum("srn,an->sra", values, vander_inv), spans
 
 
-def _locate(breaks, t):
-    """(span (m,), local x (m,), 1 / span length (m,)) of parameters t clipped into [breaks[0], breaks[-1]]."""
-    t = np.clip(t, breaks[0], breaks[-1])
-    k = np.clip(np.searchsorted(breaks, t, side="right") - 1, 0, len(breaks) - 2)
-    inv = 1.0 / (breaks[k + 1] - breaks[k])
-    return k, (t - breaks[k]) * inv, inv
+class _Spans:
+    """The breaks of one parameter direction, set up once for `locate`: the inner breaks (a searchsorted
+    over them gives the span with no clipping of the result) and the reciprocal span lengths."""
+
+    def __init__(self, breaks):
+        self.breaks = breaks
+        self.lo, self.hi = float(breaks[0]), float(breaks[-1])
+        self.inner = np.ascontiguousarray(breaks[1:-1])
+        self.inv = 1.0 / np.diff(breaks)
+
+    def locate(self, t):
+        """(span (m,), local x (m,) in [0, 1], 1 / span length (m,)) of parameters t (m,) clipped into
+        [breaks[0], breaks[-1]] (np.minimum/np.maximum: np.clip's dispatch costs more on small arrays)."""
+        t = np.minimum(np.maximum(t, self.lo), self.hi)
+        k = np.searchsorted(self.inner, t, side="right")
+        inv = self.inv[k]
+        return k, (t - self.breaks[k]) * inv, inv
 
 
-def _powers(x, p, derivative):
-    """(m, p+1) powers x^a, and with `derivative` also their derivatives a x^(a-1)."""
-    pw = np.empty((len(x), p + 1))
-    pw[:, 0] = 1.0
-    for a in range(1, p + 1):
-        pw[:, a] = pw[:, a - 1] * x
-    if not derivative:
-        return pw, None
-    d = np.zeros_like(pw)
-    d[:, 1:] = pw[:, :-1] * np.arange(1, p + 1)
-    return pw, d
+def _horner(c, x, n):
+    """sum_a c[:, a] x^a for coefficients c (m, n+1, ...) and x broadcasting against c[:, 0]; in place
+    on one copy (no temporary per step)."""
+    out = c[:, n].copy()
+    for a in range(n - 1, -1, -1):
+        out *= x
+        out += c[:, a]
+    return out
+
+
+def _horner_d(c, x, n):
+    """d/dx of `_horner(c, x, n)`: sum_a a c[:, a] x^(a-1)."""
+    if n == 0:
+        return np.zeros_like(c[:, 0])
+    out = c[:, n] * float(n)
+    for a in range(n - 1, 0, -1):
+        out *= x
+        out += c[:, a] * float(a)
+    return out
 
 
 class _CurvePower:
@@ -64,7 +83,8 @@ class _CurvePower:
 
     def __init__(self, curve):
         self.p = curve.degree
-        self.breaks, m, spans = _span_matrices(curve.knots, curve.degree)
+        breaks, m, spans = _span_matrices(curve.knots, curve.degree)
+        self.spans = _Spans(breaks)
         win = curve.homogeneous[spans[:, None] - self.p + np.arange(self.p + 1)[None, :]]   # (s, r, c)
         self.nc = win.shape[-1]
         self.flat = np.ascontiguousarray(np.einsum("sra,src->sac", m, win).reshape(len(spans), -1))
@@ -72,14 +92,15 @@ class _CurvePower:
 
     def d(self, t, order):
         """Points (m, d) and, for order 1, first derivatives (m, d)."""
-        k, x, inv = _locate(self.breaks, np.asarray(t, float))
-        pw, dp = _powers(x, self.p, order > 0)
+        k, x, inv = self.spans.locate(np.asarray(t, float))
         c = self.flat.take(k, axis=0).reshape(len(k), self.p + 1, self.nc)        # (m, a, c)
-        h = np.einsum("ma,mac->mc", pw, c)
+        x = x[:, None]
+        h = _horner(c, x, self.p)
         pt = h[:, :-1] / h[:, -1:] if self.rational else h[:, :-1]
         if not order:
             return pt, None
-        hd = np.einsum("ma,mac->mc", dp, c) * inv[:, None]
+        hd = _horner_d(c, x, self.p)
+        hd *= inv[:, None]
         if self.rational:
             return pt, (hd[:, :-1] - hd[:, -1:] * pt) / h[:, -1:]
         return pt, hd[:, :-1]
@@ -90,8 +111,9 @@ class _SurfacePower:
 
     def __init__(self, surface):
         p, q = self.p, self.q = surface.degree_u, surface.degree_v
-        self.bu, mu, su = _span_matrices(surface.knots_u, p)
-        self.bv, mv, sv = _span_matrices(surface.knots_v, q)
+        bu, mu, su = _span_matrices(surface.knots_u, p)
+        bv, mv, sv = _span_matrices(surface.knots_v, q)
+        self.spans_u, self.spans_v = _Spans(bu), _Spans(bv)
         pw = surface.homogeneous                                             # (nu, nv, 4)
         iu = su[:, None] - p + np.arange(p + 1)[None, :]
         iv = sv[:, None] - q + np.arange(q + 1)[None, :]
@@ -114,31 +136,20 @@ class _SurfacePower:
         return tuple(None if parts[0][i] is None else np.concatenate([b[i] for b in parts]) for i in range(3))
 
     def _block(self, u, v, order):
-        ku, xu, iu = _locate(self.bu, u)
-        kv, xv, iv = _locate(self.bv, v)
+        ku, xu, iu = self.spans_u.locate(u)
+        kv, xv, iv = self.spans_v.locate(v)
         p, q = self.p, self.q
         c = self.flat.take(ku * self.nsv + kv, axis=0).reshape(len(u), p + 1, q + 1, self.nc)   # (m, a, b, c)
-        xu2, xv2 = xu[:, None, None], xv[:, None]
-        row = c[:, p]                                                        # Horner in u: (m, b, c)
-        for a in range(p - 1, -1, -1):
-            row = row * xu2 + c[:, a]
-        h = row[:, q]
-        for b in range(q - 1, -1, -1):
-            h = h * xv2 + row[:, b]
+        xu, xv = xu[:, None, None], xv[:, None]
+        row = _horner(c, xu, p)                                              # in u: (m, b, c)
+        h = _horner(row, xv, q)
         pt = h[:, :3] / h[:, 3:] if self.rational else h
         if not order:
             return pt, None, None
-        drow = c[:, p] * p                                                   # d/du by Horner
-        for a in range(p - 1, 0, -1):
-            drow = drow * xu2 + c[:, a] * a
-        hu = drow[:, q]
-        hv = row[:, q] * q
-        for b in range(q - 1, -1, -1):
-            hu = hu * xv2 + drow[:, b]
-            if b:
-                hv = hv * xv2 + row[:, b] * b
-        hu = hu * iu[:, None]
-        hv = hv * iv[:, None]
+        hu = _horner(_horner_d(c, xu, p), xv, q)
+        hv = _horner_d(row, xv, q)
+        hu *= iu[:, None]
+        hv *= iv[:, None]
         if self.rational:
             w = h[:, 3:]
             return pt, (hu[:, :3] - hu[:, 3:] * pt) / w, (hv[:, :3] - hv[:, 3:] * pt) / w
