@@ -158,8 +158,8 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
     spacing : the target's point spacing (default: measured on the tree); target_weights : (m,)
     confidence of each target point (e.g. its planarity, low at creases);
     max_dist : initial correspondence distance (default: 3 x the median initial distance of the first
-    stage's points, from its first search, at most the source's RMS radius); min_dist : its floor
-    (default: 3 x the target's point spacing);
+    stage's points, from its first search, which stops at a third of the source's RMS radius, and at most
+    that radius); min_dist : its floor (default: 3 x the target's point spacing);
     sample : source points used in the first stage (approximate matches, one step each), which hands
     over when the step or the cost change falls below 10 x the final thresholds;
     final_sample : source points of the final stage (a random subset, Rusinkiewicz & Levoy 2001,
@@ -192,8 +192,8 @@ def icp(source, target, target_normals, init=None, *, source_normals=None, targe
         p = src @ T[:3, :3].T + T[:3, 3]
         dist, j = tree.query(p, distance_upper_bound=radius / 3 if max_dist is None else max_dist,
                              workers=_workers(len(p)), eps=0.0 if full else APPROX)
-        if max_dist is None:    # from the first search, which can stop at radius / 3: a median beyond hits the cap
-            max_dist = min(max(3 * float(np.median(dist)), min_dist), radius)
+        if max_dist is None:   # the first search stops at radius / 3: a median beyond it means the cap; the
+            max_dist = min(max(3 * float(np.median(dist)), min_dist), radius)      # first step uses what it found
             dist[dist > max_dist] = np.inf
         hit = np.flatnonzero(np.isfinite(dist))
         j = j[hit]
