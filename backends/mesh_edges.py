@@ -32,30 +32,64 @@ class Piece:
         uv = self.uv(np.clip(np.asarray(s, float), 0.0, 1.0))
         return self.patch.evaluate(uv[:, 0], uv[:, 1])
 
-def _sample_piece(piece, tol, s=None):
-    """Parameters s (k,) in [0, 1] such that every chord of the piece's 3-D image is within `tol` of it
-    (point-to-segment distance at 3 inner points per chord). Each knot span starts with equal steps
-    sized from its largest sagitta over 16 probe steps (the sagitta scales as the square of the step);
-    a chord still failing by d is cut into ceil(sqrt(d / tol)) equal parts."""
-    if s is None:  # per span: equal steps from the largest sagitta over 16 probe steps
-        b = piece.breaks
-        t = b[:-1, None] + np.diff(b)[:, None] * np.linspace(0, 1, 33)[None, :]
-        pts = piece.xyz(t.ravel()).reshape(len(b) - 1, 33, 3)
+def xyz_of(pieces, params) -> list:
+    """[xyz (k_i, 3)] of pieces[i] at parameters params[i] (k_i,): the (u, v) of all pieces on one
+    surface (`Patch.whole`: sub-patches between creases share their surface's) are evaluated in one
+    call rather than one call per piece, which is what small models spend their time on."""
+    uv = [p.uv(np.clip(np.asarray(s, float), 0.0, 1.0)) for p, s in zip(pieces, params)]
+    groups = {}
+    for i, p in enumerate(pieces):
+        groups.setdefault(id(p.patch.whole), []).append(i)
+    out = [None] * len(pieces)
+    for idx in groups.values():
+        every = np.concatenate([uv[i] for i in idx])
+        xyz = pieces[idx[0]].patch.whole.evaluate(every[:, 0], every[:, 1])
+        for i, part in zip(idx, np.split(xyz, np.cumsum([len(uv[i]) for i in idx[:-1]]))):
+            out[i] = part
+    return out
+
+
+def _cut(a, b, k) -> np.ndarray:
+    """The inner points of intervals [a, b] (m,) each cut into k (m,) equal parts, concatenated."""
+    k = np.asarray(k, int)
+    which = np.repeat(np.arange(len(k)), k - 1)
+    j = np.arange(len(which)) - np.repeat(np.cumsum(k - 1) - (k - 1), k - 1) + 1
+    return ((b - a)[which] / k[which]) * j + a[which]   # as np.linspace computes them
+
+
+def _sample_pieces(pieces, tol) -> list:
+    """Parameters s (k,) in [0, 1] per piece such that every chord of the piece's 3-D image is within
+    `tol` of it (point-to-segment distance at 3 inner points per chord). Each knot span starts with
+    equal steps sized from its largest sagitta over 16 probe steps (the sagitta scales as the square of
+    the step); a chord still failing by d is cut into ceil(sqrt(d / tol)) equal parts. All pieces are
+    sampled together: one `xyz_of` per round."""
+    limit = CERTIFY * tol
+    fine = np.linspace(0, 1, 33)
+    spans = [p.breaks for p in pieces]
+    probes = xyz_of(pieces, [(b[:-1, None] + np.diff(b)[:, None] * fine[None, :]).ravel() for b in spans])
+    out = []
+    for b, pts in zip(spans, probes):
+        pts = pts.reshape(len(b) - 1, 33, 3)
         d = segment_distance(pts[:, 1::2], pts[:, 0:-1:2], pts[:, 2::2]).max(axis=1)
-        n = np.maximum(1, np.ceil(16 * np.sqrt(d / (CERTIFY * tol)))).astype(int)
-        s = np.unique(np.concatenate([np.linspace(a, c, k + 1) for a, c, k in zip(b[:-1], b[1:], n)]))
+        n = np.maximum(1, np.ceil(16 * np.sqrt(d / limit))).astype(int)
+        out.append(np.unique(np.concatenate([b, _cut(b[:-1], b[1:], n)])))
+    fr = np.array([0.25, 0.5, 0.75])
+    active = list(range(len(pieces)))
     for _ in range(40):
-        p = piece.xyz(s)
-        a, h = s[:-1], np.diff(s)
-        fr = np.array([0.25, 0.5, 0.75])
-        q = piece.xyz((a[:, None] + h[:, None] * fr).ravel()).reshape(len(a), 3, 3)
-        dev = segment_distance(q, p[:-1, None], p[1:, None]).max(axis=1)
-        bad = dev > CERTIFY * tol
-        if not bad.any():
-            return s
-        k = np.clip(np.ceil(np.sqrt(dev[bad] / (CERTIFY * tol))), 2, 64).astype(int)
-        new = [a0 + h0 * np.arange(1, ki) / ki for a0, h0, ki in zip(a[bad], h[bad], k)]
-        s = np.unique(np.concatenate([s] + new))
+        if not active:
+            return out
+        at = [np.concatenate([out[i], (out[i][:-1, None] + np.diff(out[i])[:, None] * fr).ravel()]) for i in active]
+        still = []
+        for i, xyz in zip(active, xyz_of([pieces[i] for i in active], at)):
+            s = out[i]
+            p, q = xyz[:len(s)], xyz[len(s):].reshape(len(s) - 1, 3, 3)
+            dev = segment_distance(q, p[:-1, None], p[1:, None]).max(axis=1)
+            bad = dev > limit
+            if bad.any():
+                k = np.clip(np.ceil(np.sqrt(dev[bad] / limit)), 2, 64).astype(int)
+                out[i] = np.unique(np.concatenate([s, _cut(s[:-1][bad], s[1:][bad], k)]))
+                still.append(i)
+        active = still
     raise BackendError("a boundary curve could not be sampled to the tolerance")
 
 
@@ -109,7 +143,7 @@ class Edges:
 
         self.tol, self.eps = tol, eps
         self.pieces = [p for f in faces for loop in f.loops for p in loop]
-        probe = np.stack([p.xyz(np.linspace(0, 1, 17)) for p in self.pieces])   # (pieces, 17, 3)
+        probe = np.stack(xyz_of(self.pieces, [np.linspace(0, 1, 17)] * len(self.pieces)))   # (pieces, 17, 3)
         ends = probe[:, [0, -1]].reshape(-1, 3)
         pairs = cKDTree(ends).query_pairs(eps, output_type="ndarray")
         n = len(ends)
@@ -143,32 +177,36 @@ class Edges:
                     self.same_dir[j] = same
         self.reps = reps
         self.version = np.zeros(len(reps), int)
-        self.rep_s = [_sample_piece(self.pieces[r], tol) for r in reps]
+        self.rep_s = _sample_pieces([self.pieces[r] for r in reps], tol)
         self.rep_ids = [None] * len(reps)
         self.member_s = {}
         self._assign_ids()
 
     def _assign_ids(self):
-        for g, r in enumerate(self.reps):
-            if self.rep_ids[g] is not None and len(self.rep_ids[g]) == len(self.rep_s[g]):
-                continue
-            s = self.rep_s[g]
-            inner = self.pieces[r].xyz(s[1:-1])
-            ids = np.concatenate([[self.corner[r, 0]], self.nvert + np.arange(len(inner)), [self.corner[r, 1]]])
-            self.vertices.append(inner)
-            self.nvert += len(inner)
+        """Vertex ids of every group sampled anew, and each member piece's parameters at its
+        representative's samples (the same parameters, reversed or not, when they land on the samples;
+        else closest points); the new samples of all groups evaluated together."""
+        todo = [g for g, ids in enumerate(self.rep_ids) if ids is None or len(ids) != len(self.rep_s[g])]
+        inner = xyz_of([self.pieces[self.reps[g]] for g in todo], [self.rep_s[g][1:-1] for g in todo])
+        members, guesses, targets = [], [], []
+        for g, pts in zip(todo, inner):
+            r, s = self.reps[g], self.rep_s[g]
+            ids = np.concatenate([[self.corner[r, 0]], self.nvert + np.arange(len(pts)), [self.corner[r, 1]]])
+            self.vertices.append(pts)
+            self.nvert += len(pts)
             self.rep_ids[g] = ids
+            self.member_s[r] = s
             for j in np.flatnonzero(self.group == g):
-                if j == r:
-                    self.member_s[j] = s
-                    continue
-                pts = np.concatenate([self.vertices[0][ids[:1]], inner, self.vertices[0][ids[-1:]]])
-                sj = s if self.same_dir[j] else 1.0 - s
-                if np.abs(self.pieces[j].xyz(sj) - pts).max() >= self.eps:   # not the same parameterisation
-                    sj, _ = _invert(self.pieces[j], pts)
-                sj = sj.copy()
-                sj[[0, -1]] = (0.0, 1.0) if self.same_dir[j] else (1.0, 0.0)
-                self.member_s[j] = sj
+                if j != r:
+                    members.append(j)
+                    guesses.append(s if self.same_dir[j] else 1.0 - s)
+                    targets.append(np.concatenate([self.vertices[0][ids[:1]], pts, self.vertices[0][ids[-1:]]]))
+        for j, sj, pts, xyz in zip(members, guesses, targets, xyz_of([self.pieces[j] for j in members], guesses)):
+            if np.abs(xyz - pts).max() >= self.eps:   # not the same parameterisation
+                sj, _ = _invert(self.pieces[j], pts)
+            sj = sj.copy()
+            sj[[0, -1]] = (0.0, 1.0) if self.same_dir[j] else (1.0, 0.0)
+            self.member_s[j] = sj
 
     def split(self, requests) -> None:
         """Insert the midpoint of rep segments {(group, index)}."""

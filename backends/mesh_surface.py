@@ -31,6 +31,14 @@ class Patch:
     breaks_v: np.ndarray
 
     creases_u = creases_v = np.zeros(0)
+    #: the patch over its surface's whole domain, when this one is a `restrict`ed part of it
+    base = None
+
+    @property
+    def whole(self) -> "Patch":
+        """The patch over the whole surface (self unless restricted): it evaluates every sub-patch's
+        (u, v) alike, so that evaluations for several sub-patches can be made in one call."""
+        return self.base or self
 
     def d1(self, u, v):
         raise NotImplementedError
@@ -40,6 +48,7 @@ class Patch:
         import copy
 
         sub = copy.copy(self)
+        sub.base = self.whole
         sub.domain = tuple(tuple(map(float, d)) for d in domain)
         (u0, u1), (v0, v1) = sub.domain
         sub.breaks_u = np.unique(np.concatenate([[u0, u1], self.breaks_u[(self.breaks_u > u0) & (self.breaks_u < u1)]]))
@@ -145,7 +154,11 @@ class NurbsPatch(Patch):
 
 
 class RevolutionPatch(Patch):
-    """A `Revolution` by angle u in [start, end] and profile parameter v: S = a + R_u (C(v) - a)."""
+    """A `Revolution` by angle u in [start, end] and profile parameter v: S = a + R_u (C(v) - a).
+
+    The profile is kept in the axis frame (e1, e2, k) with the axis point as origin, so the rotation
+    by u is a plane rotation of its first two coordinates and one product with the frame gives world
+    coordinates (points, Su = k x (S - a) and Sv together)."""
 
     def __init__(self, rev):
         self.profile = rev.profile.nurbs()
@@ -153,35 +166,45 @@ class RevolutionPatch(Patch):
         self.k = np.asarray(rev.axis_dir, float)
         self.domain = ((rev.start, rev.end), self.profile.domain)
         k = self.k
-        self._cross_k = np.array([[0, k[2], -k[1]], [-k[2], 0, k[0]], [k[1], -k[0], 0]])   # x @ this = k x x
-        self._kk = np.outer(k, k)
+        e1 = np.cross(k, np.eye(3)[int(np.argmin(np.abs(k)))])
+        e1 /= np.linalg.norm(e1)
+        self.frame = np.array([e1, np.cross(k, e1), k])                   # rows: frame axes in world
+        to_frame = np.eye(4)
+        to_frame[:3, :3], to_frame[:3, 3] = self.frame, -self.frame @ self.a
+        self.local = self.profile.transform(to_frame)                     # the profile in frame coordinates
         p = self.profile
         self.breaks_u = np.array([rev.start, rev.end])
         self.breaks_v = np.unique(p.knots[p.degree:len(p.knots) - p.degree])
         self.creases_v = _creases(p.knots, p.degree)
-        self.power = power_form(p)
+        self.power = power_form(self.local)
 
     def _profile(self, v, order):
-        v = np.clip(np.asarray(v, float), *self.domain[1])
+        """The profile in frame coordinates at v (clipped into the domain) and, for order 1, its derivative."""
+        v0, v1 = self.domain[1]
+        v = np.minimum(np.maximum(np.asarray(v, float), v0), v1)
         if self.power is not None:
             return self.power.d(v, order)
-        c = self.profile.derivatives(v, order) if order else self.profile.evaluate(v)[None]
+        c = self.local.derivatives(v, order) if order else self.local.evaluate(v)[None]
         return c[0], (c[1] if order else None)
-
-    def _rotate(self, x, u):
-        """Rows x (m, 3) rotated about the axis direction by angles u (m,) (Rodrigues' formula)."""
-        cos, sin = np.cos(u)[:, None], np.sin(u)[:, None]
-        return x * cos + (x @ self._cross_k) * sin + (x @ self._kk) * (1 - cos)
 
     def d1(self, u, v):
         u = np.asarray(u, float)
         c, dc = self._profile(v, 1)
-        rw = self._rotate(c - self.a, u)
-        return self.a + rw, rw @ self._cross_k, self._rotate(dc, u)
+        cos, sin = np.cos(u), np.sin(u)
+        x = c[:, 0] * cos - c[:, 1] * sin
+        y = c[:, 0] * sin + c[:, 1] * cos
+        zero = np.zeros_like(x)
+        local = np.stack([np.stack([x, y, c[:, 2]], axis=1), np.stack([-y, x, zero], axis=1),
+                          np.stack([dc[:, 0] * cos - dc[:, 1] * sin, dc[:, 0] * sin + dc[:, 1] * cos, dc[:, 2]], axis=1)])
+        s, su, sv = local @ self.frame
+        return s + self.a, su, sv
 
     def evaluate(self, u, v):
+        u = np.asarray(u, float)
         c, _ = self._profile(v, 0)
-        return self.a + self._rotate(c - self.a, np.asarray(u, float))
+        cos, sin = np.cos(u), np.sin(u)
+        local = np.stack([c[:, 0] * cos - c[:, 1] * sin, c[:, 0] * sin + c[:, 1] * cos, c[:, 2]], axis=1)
+        return local @ self.frame + self.a
 
 
 class PlanePatch(Patch):
