@@ -121,20 +121,21 @@ class _FaceMesher:
         self.interior = self._clear_of_boundary(np.column_stack([uu.ravel(), vv.ravel()]))
         p = self.scaled(self.b_uv)
         long = np.linalg.norm(p[self.segments[:, 1]] - p[self.segments[:, 0]], axis=1) > LONGEST_SEGMENT
-        self.requests = {self.seg_ref[k] for k in np.flatnonzero(long) if self.seg_ref[k][0] >= 0}
+        self.requests = self._refs(np.flatnonzero(long))
 
     def _boundary(self):
         """Boundary samples (uv, vertex ids), loops and segments from the current edge sampling."""
         face, edges = self.face, self.edges
-        uvs, ids, refs, loops = [], [], [], []
+        uvs, ids, groups, reps, loops = [], [], [], [], []
         n0 = 0
         for loop, pids in zip(face.loops, self.piece_ids):
             luv, lid = [], []
             for piece, j in zip(loop, pids):
-                s, vid, g, idx = edges.samples(j, _degenerate_s(piece, face.grid))
+                s, vid, g, idx = edges.samples(j, _degenerate_s(piece, face.grid) if edges.degenerate[j] else None)
                 luv.append(piece.uv(s)[:-1])
                 lid.append(vid[:-1])
-                refs += [(g, int(min(idx[k], idx[k + 1]))) for k in range(len(s) - 1)]
+                groups.append(np.full(len(s) - 1, g))
+                reps.append(np.minimum(idx[:-1], idx[1:]))
             n = sum(len(x) for x in luv)
             loops.append(n0 + np.arange(n))
             uvs += luv
@@ -144,10 +145,16 @@ class _FaceMesher:
         self.segments = np.concatenate([np.column_stack([lp, np.roll(lp, -1)]) for lp in loops]).astype(np.int64)
         self.b_uv = np.concatenate(uvs)
         self.b_ids = np.concatenate(ids)
-        self.seg_ref = refs                                    # per segment: (group, rep index)
+        self.seg_group = np.concatenate(groups)                # per segment: its edge group (-1: a pole)
+        self.seg_rep = np.concatenate(reps)                    # and the index of its rep segment
         self.versions = self.edges.version.copy()
         self.certified = np.zeros(0, np.int64)                 # keys of triangles measured within tol
         self.qhull.reset()                                     # the boundary points changed
+
+    def _refs(self, segments) -> set:
+        """Split requests {(group, rep index)} for boundary segments (indices; poles left out)."""
+        g, k = self.seg_group[segments], self.seg_rep[segments]
+        return set(zip(g[g >= 0].tolist(), k[g >= 0].tolist()))
 
     def refresh(self):
         """Take up the current edge sampling (after this face or a neighbour split a shared edge)."""
@@ -243,9 +250,7 @@ class _FaceMesher:
         ekey = np.minimum(a, b) * n + np.maximum(a, b)
         pos = np.minimum(np.searchsorted(seg[order], ekey), len(seg) - 1)
         on_boundary = (edge >= 0) & (seg[order][pos] == ekey)
-        for k in order[pos[on_boundary]]:
-            if self.seg_ref[k][0] >= 0:
-                self.requests.add(self.seg_ref[k])
+        self.requests |= self._refs(order[pos[on_boundary]])
         at = np.einsum("tk,tkd->td", _BARY[np.maximum(wf, 0)], uv[tf])
         at[normal] = 0.5 * (uv[a[normal]] + uv[b[normal]])
         return at[~on_boundary]
@@ -280,28 +285,33 @@ class _FaceMesher:
         k = _EDGE_OF_SAMPLE[_ON_EDGE]
         slot = eid[:, k] * 5 + np.where(a[:, k] < b[:, k], _STEP - 1, 5 - _STEP)   # (t, 15) into (e, 5)
 
-        def along(edges, steps):   # deviation (len(edges), len(steps)) at steps / 6 from lo to hi
+        def along(edges, steps):   # points and guesses at steps / 6 from lo to hi, (len(edges) * len(steps), .)
             w = np.asarray(steps, float)[None, :, None] / 6
             x = (1 - w) * xyz[lo[edges], None] + w * xyz[hi[edges], None]
             g = (1 - w) * uv[lo[edges], None] + w * uv[hi[edges], None]
-            return self._deviation(x.reshape(-1, 3), g.reshape(-1, 2)).reshape(len(edges), len(steps))
+            return x.reshape(-1, 3), g.reshape(-1, 2)
 
-        def inside(rows, samples):   # deviation (len(rows), len(samples)) at barycentric samples
+        def inside(rows, samples):   # points and guesses at barycentric samples, (len(rows) * len(samples), .)
             x = np.einsum("sk,tkd->tsd", samples, xyz[tri[rows]]).reshape(-1, 3)
             g = np.einsum("sk,tkd->tsd", samples, uv[tri[rows]]).reshape(-1, 2)
-            return self._deviation(x, g).reshape(len(rows), len(samples))
+            return x, g
+
+        def deviation(*parts):   # one measurement of all the parts' points, split back
+            d = self._deviation(np.concatenate([x for x, _ in parts]), np.concatenate([g for _, g in parts]))
+            return np.split(d, np.cumsum([len(x) for x, _ in parts[:-1]]))
 
         on_edge = np.zeros((len(keys), 5))
-        on_edge[:, 2] = along(np.arange(len(keys)), [3])[:, 0]
         dist = np.zeros((len(tri), len(_BARY)))
-        dist[:, _CENTROID] = inside(np.arange(len(tri)), _BARY[[_CENTROID]])[:, 0]
+        on_edge[:, 2], dist[:, _CENTROID] = deviation(along(np.arange(len(keys)), [3]),
+                                                      inside(np.arange(len(tri)), _BARY[[_CENTROID]]))
         dist[:, _ON_EDGE] = on_edge.ravel()[slot]
         full = np.flatnonzero((dist <= limit).all(axis=1))             # only the coarse samples are set
         if len(full):
             edges = np.unique(eid[full])
-            on_edge[edges[:, None], [0, 1, 3, 4]] = along(edges, [1, 2, 4, 5])
+            rest, inner = deviation(along(edges, [1, 2, 4, 5]), inside(full, _BARY[_INNER]))
+            on_edge[edges[:, None], [0, 1, 3, 4]] = rest.reshape(-1, 4)
             dist[full[:, None], _ON_EDGE] = on_edge.ravel()[slot[full]]
-            dist[full[:, None], _INNER] = inside(full, _BARY[_INNER])
+            dist[full[:, None], _INNER] = inner.reshape(len(full), -1)
         fail, worst = (dist > limit).any(axis=1), np.argmax(dist, axis=1)
         if self.angle_tol:
             v, uvt = xyz[tri], uv[tri]
@@ -331,7 +341,7 @@ def _patch_probe(patch):
 
 def _uses_changed(mesher, edges) -> bool:
     """True when an edge group on this face's boundary was split after the face was meshed."""
-    groups = {g for g, _ in mesher.seg_ref if g >= 0}
+    groups = set(mesher.seg_group[mesher.seg_group >= 0].tolist())
     return any(mesher.versions[g] != edges.version[g] for g in groups)
 
 

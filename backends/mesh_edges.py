@@ -224,7 +224,8 @@ class Edges:
         return np.concatenate(self.vertices)
 
     def samples(self, j, degenerate_s):
-        """(s (k,), vertex ids (k,), group, rep indices (k,)) of piece j, in the piece's direction."""
+        """(s (k,), vertex ids (k,), group, rep indices (k,)) of piece j, in the piece's direction; a
+        degenerate piece (a pole) takes the parameters `degenerate_s` (unused, may be None, otherwise)."""
         if self.degenerate[j]:
             s = degenerate_s
             return s, np.full(len(s), self.corner[j, 0]), -1, np.zeros(len(s), int)
