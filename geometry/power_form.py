@@ -58,23 +58,23 @@ class _Spans:
 
 
 def _horner(c, x, n):
-    """sum_a c[:, a] x^a for coefficients c (m, n+1, ...) and x broadcasting against c[:, 0]; in place
-    on one copy (no temporary per step)."""
-    out = c[:, n].copy()
+    """sum_a c[a] x^a (a = 0..n) for coefficients c (n+1, ..., m) and x (m,); in place on one copy
+    (no temporary per step)."""
+    out = c[n].copy()
     for a in range(n - 1, -1, -1):
         out *= x
-        out += c[:, a]
+        out += c[a]
     return out
 
 
 def _horner_d(c, x, n):
-    """d/dx of `_horner(c, x, n)`: sum_a a c[:, a] x^(a-1)."""
+    """d/dx of `_horner(c, x, n)`: sum_a a c[a] x^(a-1)."""
     if n == 0:
-        return np.zeros_like(c[:, 0])
-    out = c[:, n] * float(n)
+        return np.zeros_like(c[0])
+    out = c[n] * float(n)
     for a in range(n - 1, 0, -1):
         out *= x
-        out += c[:, a] * float(a)
+        out += c[a] * float(a)
     return out
 
 
@@ -87,23 +87,24 @@ class _CurvePower:
         self.spans = _Spans(breaks)
         win = curve.homogeneous[spans[:, None] - self.p + np.arange(self.p + 1)[None, :]]   # (s, r, c)
         self.nc = win.shape[-1]
-        self.flat = np.ascontiguousarray(np.einsum("sra,src->sac", m, win).reshape(len(spans), -1))
+        coef = np.einsum("sra,src->sac", m, win).reshape(len(spans), -1)
+        self.flat_t = np.ascontiguousarray(coef.T)                           # (a, c) x span
         self.rational = curve.is_rational
 
     def d(self, t, order):
-        """Points (m, d) and, for order 1, first derivatives (m, d)."""
+        """Points (m, d) and, for order 1, first derivatives (m, d). The coefficients are gathered
+        point-last (a, c, m), as for surfaces."""
         k, x, inv = self.spans.locate(np.asarray(t, float))
-        c = self.flat.take(k, axis=0).reshape(len(k), self.p + 1, self.nc)        # (m, a, c)
-        x = x[:, None]
-        h = _horner(c, x, self.p)
-        pt = h[:, :-1] / h[:, -1:] if self.rational else h[:, :-1]
+        c = self.flat_t.take(k, axis=1).reshape(self.p + 1, self.nc, len(k))
+        h = _horner(c, x, self.p)                                            # (c, m)
+        pt = h[:-1] / h[-1] if self.rational else h[:-1]
         if not order:
-            return pt, None
+            return pt.T, None
         hd = _horner_d(c, x, self.p)
-        hd *= inv[:, None]
+        hd *= inv
         if self.rational:
-            return pt, (hd[:, :-1] - hd[:, -1:] * pt) / h[:, -1:]
-        return pt, hd[:, :-1]
+            return pt.T, ((hd[:-1] - hd[-1] * pt) / h[-1]).T
+        return pt.T, hd[:-1].T
 
 
 class _SurfacePower:
@@ -124,7 +125,7 @@ class _SurfacePower:
             coef = coef[..., :3]
         self.nsv = len(sv)
         self.nc = coef.shape[-1]
-        self.flat = np.ascontiguousarray(coef.reshape(len(su) * len(sv), -1))   # per span pair: (a, b, c)
+        self.flat_t = np.ascontiguousarray(coef.reshape(len(su) * len(sv), -1).T)   # (a, b, c) x span pair
 
     def d(self, u, v, order):
         """Points (m, 3) and, for order 1, the partials Su, Sv (m, 3) (blocks of _POWER_CHUNK)."""
@@ -136,24 +137,26 @@ class _SurfacePower:
         return tuple(None if parts[0][i] is None else np.concatenate([b[i] for b in parts]) for i in range(3))
 
     def _block(self, u, v, order):
+        """`d` on one block. The coefficients are gathered point-last, (a, b, c, m): every Horner step
+        is then one pass over contiguous rows of m values (point-first, a step loops over short rows
+        of (b, c) per point, about twice the time from a few hundred points on)."""
         ku, xu, iu = self.spans_u.locate(u)
         kv, xv, iv = self.spans_v.locate(v)
         p, q = self.p, self.q
-        c = self.flat.take(ku * self.nsv + kv, axis=0).reshape(len(u), p + 1, q + 1, self.nc)   # (m, a, b, c)
-        xu, xv = xu[:, None, None], xv[:, None]
-        row = _horner(c, xu, p)                                              # in u: (m, b, c)
-        h = _horner(row, xv, q)
-        pt = h[:, :3] / h[:, 3:] if self.rational else h
+        c = self.flat_t.take(ku * self.nsv + kv, axis=1).reshape(p + 1, q + 1, self.nc, len(u))
+        row = _horner(c, xu, p)                                      # in u: (b, c, m)
+        h = _horner(row, xv, q)                                      # (c, m)
+        pt = h[:3] / h[3] if self.rational else h
         if not order:
-            return pt, None, None
+            return pt.T, None, None
         hu = _horner(_horner_d(c, xu, p), xv, q)
         hv = _horner_d(row, xv, q)
-        hu *= iu[:, None]
-        hv *= iv[:, None]
+        hu *= iu
+        hv *= iv
         if self.rational:
-            w = h[:, 3:]
-            return pt, (hu[:, :3] - hu[:, 3:] * pt) / w, (hv[:, :3] - hv[:, 3:] * pt) / w
-        return pt, hu, hv
+            w = h[3]
+            return pt.T, ((hu[:3] - hu[3] * pt) / w).T, ((hv[:3] - hv[3] * pt) / w).T
+        return pt.T, hu.T, hv.T
 
 
 def power_form(obj):
