@@ -7,11 +7,12 @@ points exceed the tolerance, and solve again, until the certified statistic hold
 control points is reached. This module holds the bases, the solvers and the curve fit; the surface loop,
 with its approximation limit (no net finer than the data), is `rgm.fitters.freeform_surface.fit_surface`.
 
-The error of a data point is its parametric residual |S(u_i, v_i) - P_i| (model units). It is an upper
-bound of the point's closest-point distance to the surface, so a fit certified with it is conservative.
+The error of a data point is its parametric residual |S(u_i, v_i) - P_i| (model units), an upper bound of
+its closest-point distance; the surface loop replaces it by the foot-point distance where it exceeds the
+tolerance, so what it certifies is what the certificate measures.
 
-Spaces are nested under knot insertion, so the unsmoothed least-squares error can only fall; with the small
-smoothing term (which keeps spans without data well posed) a refinement step that would raise the error is
+Spaces are nested under knot insertion, so the unsmoothed least-squares error can only fall; with the
+smoothing term (the surface's bending energy, which keeps spans without data well posed) a refinement step that would raise the error is
 replaced by the previous surface with the knots inserted (same shape), so the certified error never rises.
 
 Linear algebra: design matrices come from `scipy.interpolate.BSpline.design_matrix` (sparse CSR, p+1
@@ -316,42 +317,64 @@ class ScatteredBasis:
         return M, rhs
 
 
-def _smoothing_matrix(nu: int, nv: int) -> sp.csr_matrix:
-    """Bending energy of a control net: second differences along u and along v, (nu nv, nu nv)."""
-    Du, Dv = _second_difference(nu), _second_difference(nv)
-    return (sp.kron(Du.T @ Du, sp.identity(nv)) + sp.kron(sp.identity(nu), Dv.T @ Dv)).tocsr()
+#: the densest net the surface loop builds: one control point per this many data points
+DATA_PER_CTRL = 2.0
+#: weight of the bending energy per data point at that density (dimensionless: see `_penalty`)
+SMOOTHING = 1e-9
 
 
-def solve_scattered(u, v, points, ku, kv, p, q, smoothing=1e-6):
-    """Least-squares control net (nu, nv, 3) for scattered points (n, 3) at parameters (u, v), with a
-    bending-energy term weighted by `smoothing` relative to the data term. Returns (ctrl, basis)."""
+def _bending(knots, degree: int, count: int) -> tuple[float, sp.csr_matrix]:
+    """(1/h, D'D) for one direction of a net on `knots`: h the mean knot span (parameter units) and D the
+    second differences of the control points. With them the bending energy of the surface along that
+    direction, the integral of |S_uu|^2 over the parameter domain (model units squared), is about
+    h_v / h_u^3 * sum |D_u C|^2: second differences of control points approximate h^2 S_uu."""
+    inv_h = (count - degree) / max(float(knots[-1] - knots[0]), 1e-300)
+    D = _second_difference(count)
+    return inv_h, (D.T @ D).tocsr()
+
+
+def _penalty(smoothing: float, n_ctrl: int, n_data: int) -> float:
+    """The bending energy's weight per data point for a net of n_ctrl control points on n_data points:
+    `smoothing` times the square of the net's density relative to the densest (DATA_PER_CTRL), at most
+    1. In full where few points determine each control point (the penalty decides what they leave free,
+    spans without data included); vanishing for a net much coarser than the data, which any penalty
+    would only bias."""
+    return smoothing * min(1.0, DATA_PER_CTRL * n_ctrl / max(n_data, 1)) ** 2
+
+
+def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING):
+    """Least-squares control net (nu, nv, 3) for scattered points (n, 3) at parameters (u, v), minimising
+    sum |S(u_i, v_i) - P_i|^2 + n * w * (bending energy along u + along v) (see `_bending`), w the
+    `_penalty` of `smoothing`: a penalty on the surface, not on its net. Returns (ctrl, basis)."""
     basis = ScatteredBasis.build(np.asarray(u, float), np.asarray(v, float), ku, kv, p, q)
     nu, nv = basis.shape
     M, rhs = basis.normal_equations(points)
-    R = _smoothing_matrix(nu, nv)
-    lam = smoothing * M.diagonal().sum() / max(R.diagonal().sum(), 1e-300)
-    M = (M + lam * R + 1e-14 * M.diagonal().max() * sp.identity(nu * nv)).tocsc()
+    (iu, Ru), (iv, Rv) = _bending(ku, p, nu), _bending(kv, q, nv)
+    w = len(points) * _penalty(smoothing, nu * nv, len(points))
+    R = w * iu**3 / iv * sp.kron(Ru, sp.identity(nv)) + w * iv**3 / iu * sp.kron(sp.identity(nu), Rv)
+    M = (M + R + 1e-14 * M.diagonal().max() * sp.identity(nu * nv)).tocsc()
     ctrl = scipy.sparse.linalg.splu(M).solve(rhs)   # sparse LU of the banded normal matrix: no dense BLAS
     return ctrl.reshape(nu, nv, 3), basis
 
 
-def solve_grid(u, v, grid, ku, kv, p, q, smoothing=1e-6):
+def solve_grid(u, v, grid, ku, kv, p, q, smoothing=SMOOTHING):
     """Separable least squares for a full grid (rows, cols, 3): C = Mu^-1 Bu' Z Bv Mv^-1 with
-    Mu = Bu'Bu + λ Du'Du (likewise v), each solved by banded Cholesky (half-bandwidth max(p, 2): no
-    dense factorisation, no multithreaded BLAS). Returns (ctrl (nu, nv, 3), Bu, Bv)."""
+    Mu = Bu'Bu + rows * w / h_u^3 * Du'Du (likewise v; w the `_penalty` of `smoothing`), the curve form
+    of `solve_scattered`'s bending penalty per direction, each solved by banded Cholesky (half-bandwidth
+    max(p, 2): no dense factorisation, no multithreaded BLAS). Returns (ctrl (nu, nv, 3), Bu, Bv)."""
     Bu, Bv = design_matrix(u, ku, p), design_matrix(v, kv, q)
-
-    def normal(B):
-        M = (B.T @ B).tocsr()
-        D = _second_difference(B.shape[1])
-        return M + smoothing * M.diagonal().sum() / max(B.shape[1], 1) * (D.T @ D)
-
     nu, nv = Bu.shape[1], Bv.shape[1]
     rows, cols = grid.shape[:2]
+    w = _penalty(smoothing, nu * nv, rows * cols)
+
+    def normal(B, knots, degree):
+        inv_h, R = _bending(knots, degree, B.shape[1])
+        return (B.T @ B).tocsr() + w * B.shape[0] * inv_h**3 * R
+
     T = (Bu.T.tocsr() @ grid.reshape(rows, -1)).reshape(nu, cols, 3)                  # (nu, cols, 3)
     T = (Bv.T.tocsr() @ T.transpose(1, 0, 2).reshape(cols, -1)).reshape(nv, nu, 3)    # (nv, nu, 3)
-    T = _solve_spd_banded(normal(Bv), T.reshape(nv, -1), max(q, 2)).reshape(nv, nu, 3)
-    ctrl = _solve_spd_banded(normal(Bu), T.transpose(1, 0, 2).reshape(nu, -1), max(p, 2))
+    T = _solve_spd_banded(normal(Bv, kv, q), T.reshape(nv, -1), max(q, 2)).reshape(nv, nu, 3)
+    ctrl = _solve_spd_banded(normal(Bu, ku, p), T.transpose(1, 0, 2).reshape(nu, -1), max(p, 2))
     return ctrl.reshape(nu, nv, 3), Bu, Bv
 
 

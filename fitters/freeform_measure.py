@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["TrimmedNurbs", "inside_loops", "branch_between"]
+__all__ = ["TrimmedNurbs", "foot_distances", "inside_loops", "branch_between"]
 
 _PER_SPAN = 16      # samples per knot span of a 2-D loop piece
 _BRANCH = 4097      # samples of an intersection branch in (u, v)
@@ -162,25 +162,10 @@ class TrimmedNurbs:
 
     def inner_distance(self, points: np.ndarray, iterations: int = 10) -> np.ndarray:
         """(n,) distances of points (n, 3) to points of the face found from inside: the nearest sample
-        of a dense (u, v) grid on the face, then Gauss-Newton steps on |S(u, v) - p| kept while they
-        lower the distance and stay on the face (model units)."""
+        of a dense (u, v) grid on the face, then `foot_distances` steps that stay on the face (model units)."""
         uv, xyz = self._dense()
         d, j = cKDTree(xyz).query(points)
-        x = uv[j]
-        (u0, u1), (v0, v1) = self.surface.domain
-        for _ in range(iterations):
-            der = self.surface.derivatives(x[:, 0], x[:, 1], 1)
-            r = der[0, 0] - points
-            J = np.stack([der[1, 0], der[0, 1]], axis=-1)                       # (n, 3, 2)
-            JtJ = np.einsum("nki,nkj->nij", J, J) + 1e-12 * np.eye(2)
-            step = np.linalg.solve(JtJ, -np.einsum("nki,nk->ni", J, r)[..., None])[..., 0]
-            y = np.c_[np.clip(x[:, 0] + step[:, 0], u0, u1), np.clip(x[:, 1] + step[:, 1], v0, v1)]
-            dy = np.linalg.norm(self.surface.evaluate(y[:, 0], y[:, 1]) - points, axis=1)
-            better = (dy < d) & self.inside(y)
-            if not better.any():
-                break
-            x[better], d[better] = y[better], dy[better]
-        return d
+        return foot_distances(self.surface, uv[j], points, d, self.inside, iterations)
 
     def _dense(self):
         """(u, v) (k, 2) and points (k, 3) of a dense sample of the face (about 1/250 of its size apart),
@@ -223,3 +208,39 @@ class TrimmedNurbs:
         if len(uv) == 0 and self.loops:
             uv = np.vstack(self.loops)
         return self.surface.evaluate(uv[:, 0], uv[:, 1])
+
+
+def foot_distances(surface, uv: np.ndarray, points: np.ndarray, bound: np.ndarray, inside,
+                   steps: int = 10) -> np.ndarray:
+    """(k,) distances of points (k, 3) to `surface` from start parameters uv (k, 2) whose distances are
+    `bound` (k,): Gauss-Newton steps on |S(u, v) - p| towards the foot point, clipped to the domain,
+    shortened (to a half, a quarter) where the full step does not come closer or leaves where `inside`
+    ((k, 2) -> (k,) bool) says, and kept only when one does; a point stops when no step helps or the
+    last gained less than 1e-9 of the distance. Each result is the distance to a point of the surface
+    there, so never below the true distance, and at most `bound` (model units)."""
+    (u0, u1), (v0, v1) = surface.domain
+    x, d = np.array(uv, float), np.asarray(bound, float).copy()
+    active = np.arange(len(x))
+    for _ in range(steps):
+        if not len(active):
+            break
+        xa, pa = x[active], points[active]
+        der = surface.derivatives(xa[:, 0], xa[:, 1], 1)
+        J = np.stack([der[1, 0], der[0, 1]], axis=-1)                                   # (k, 3, 2)
+        JtJ = np.einsum("kai,kaj->kij", J, J) + 1e-12 * np.eye(2)
+        step = np.linalg.solve(JtJ, -np.einsum("kai,ka->ki", J, der[0, 0] - pa)[..., None])[..., 0]
+        gain = np.zeros(len(active))
+        todo = np.arange(len(active))
+        for scale in (1.0, 0.5, 0.25):
+            y = xa[todo] + scale * step[todo]
+            y = np.c_[np.clip(y[:, 0], u0, u1), np.clip(y[:, 1], v0, v1)]
+            dy = np.linalg.norm(surface.evaluate(y[:, 0], y[:, 1]) - pa[todo], axis=1)
+            closer = (dy < d[active[todo]]) & inside(y)
+            hit = todo[closer]
+            gain[hit] = d[active[hit]] - dy[closer]
+            x[active[hit]], d[active[hit]] = y[closer], dy[closer]
+            todo = todo[~closer]
+            if not len(todo):
+                break
+        active = active[gain > 1e-9 * np.maximum(d[active], 1e-300)]
+    return d

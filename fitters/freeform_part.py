@@ -184,7 +184,8 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
 
         spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
         spacing = max(spacing, float(np.ptp(points, axis=0).max()) / bins)   # the edge is known to a raster cell
-    loops = fit_trim_loops(region, rows, cols, tol_uv=tol / _surface_speed(fit), snap_to=snap)
+    loops = fit_trim_loops(region, rows, cols, tol_uv=tol / _surface_speed(fit), snap_to=snap,
+                           domain=fit.nurbs().domain)
     outer = list(loops.outer)
     data = grid[mask] if grid is not None else points
     size = float(np.ptp(data, axis=0).max())

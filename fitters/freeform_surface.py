@@ -5,27 +5,38 @@ whose size comes from a surface characterisation, least-squares control points, 
 the middle of only those knot spans whose data exceed the tolerance, until the certified statistic holds
 or a stated limit is reached.
 
-Never chasing noise: a span is split only while each half keeps `min_lines` (default 2) data lines (grid
-rows or columns; about sqrt(n) scattered points make one line), and the net never exceeds a quarter of the
-data points, so each control point stays determined by about four data points or more. A finer net interpolates the samples, and with them their noise and any
-detail finer than the sampling: on the face scan (3.3-4.4 mm pitch) a cross-validated fit predicts
-withheld points worse with every knot beyond that density (tests/fitters/test_freeform_fit.py). When
-the tolerance is not met at that density the fit stops and says so.
+Never chasing noise: a span is split only while each half keeps `min_lines` (default 1) data lines (grid
+rows or columns; about sqrt(n) scattered points make one line), and the net never exceeds one control
+point per `data_per_ctrl` (default 2) data points. Least squares with m coefficients on n points absorbs
+a share m/n of pure noise's variance, so at that limit noise of scale sigma keeps an RMS residual of
+sigma/sqrt(2) or more: a tolerance below the noise is reported as not met, not met by interpolating the
+noise. Detail as fine as the sampling is fitted: on the face scan (3.3-4.4 mm pitch) the net that meets
+0.4 mm at its samples is nearer the scanner's own mesh between them (at its cell centres) than the net
+stopped at a quarter of the data (tests/fitters/test_freeform_fit.py): it follows the face, it does not
+oscillate: the smoothing term is the surface's bending energy (`rgm.fitters.freeform.solve_scattered`),
+which decides the control points that a net this dense leaves free.
 
-Residuals are parametric, |S(u_i, v_i) - P_i| (model units): an upper bound of each point's distance to
-the surface.
+Residuals (model units) are what the certificate measures, closest-point distances, where it matters:
+the parametric residual |S(u_i, v_i) - P_i| bounds a point's distance from above, and where it exceeds
+the tolerance a few Gauss-Newton steps from (u_i, v_i) find the foot point (`rgm.fitters.freeform_measure.foot_distances`). Whether
+the statistic meets the tolerance is then decided as on the exact distances (each residual stays an upper
+bound of its point's distance), and the refinement chases only what is really off the surface, not the
+tangential slack of the parameterisation.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from rgm.errors import GeometryError
-from rgm.fitters.freeform import (ScatteredBasis, SurfaceFit, _span_index, _split_candidates, design_matrix,
-                                  fit_stats, grid_parameters, plane_parameters, refinement_matrix, solve_grid,
-                                  solve_scattered, statistic_value)
+from rgm.fitters.freeform import (DATA_PER_CTRL, SMOOTHING, ScatteredBasis, SurfaceFit, _span_index, _split_candidates,
+                                  design_matrix, fit_stats, grid_parameters, plane_parameters, refinement_matrix,
+                                  solve_grid, solve_scattered, statistic_value)
+from rgm.fitters.freeform_measure import foot_distances
 from rgm.geometry.knots import uniform_knots
 
 __all__ = ["fit_surface", "initial_net_size"]
+
+_SAMPLE = 2000   # far points whose foot points tell whether computing all of theirs can decide anything
 
 
 def initial_net_size(grid: np.ndarray | None, mask, degree: int, n_points: int) -> int:
@@ -63,15 +74,16 @@ class _SurfaceProblem:
     """The data of a surface fit and how to solve and measure it on given knot vectors: the separable
     solve for a full grid, the sparse normal equations otherwise. Residuals are per data point."""
 
-    def __init__(self, points, mask, params, degree, smoothing):
+    def __init__(self, points, mask, params, degree, smoothing, statistic):
         pts = np.asarray(points, float)
-        self.degree, self.smoothing, self.grid = degree, smoothing, None
+        self.degree, self.smoothing, self.statistic, self.grid = degree, smoothing, statistic, None
         if pts.ndim == 3:
             valid = np.isfinite(pts).all(axis=2)
             mask = valid if mask is None else (np.asarray(mask, bool) & valid)
             if mask.sum() < (degree + 1) ** 2:
                 raise GeometryError("too few valid grid points to fit a surface")
             self.ug, self.vg = grid_parameters(np.where(mask[..., None], pts, 0.0), mask) if params is None else params
+            self.mask = mask
             ii, jj = np.nonzero(mask)
             self.u, self.v, self.data = self.ug[ii], self.vg[jj], pts[ii, jj]
             self.lines = (ii, jj)
@@ -89,21 +101,66 @@ class _SurfaceProblem:
             self.lines = None
             self.char = (None, None)
 
-    def solve(self, ku, kv):
-        """Control net (nu, nv, 3) and residuals (n,) on the knot vectors ku, kv."""
+    def solve(self, ku, kv, tol):
+        """Control net (nu, nv, 3) and residuals (n,) on the knot vectors ku, kv (`residuals`)."""
         p = self.degree
         if self.grid is not None:
             ctrl = solve_grid(self.ug, self.vg, self.grid, ku, kv, p, p, self.smoothing)[0]
-            return ctrl, self.residuals(ku, kv, ctrl)
-        ctrl, basis = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing)
-        return ctrl, np.linalg.norm(basis.evaluate(ctrl) - self.data, axis=1)
+        else:
+            ctrl = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing)[0]
+        return ctrl, self.residuals(ku, kv, ctrl, tol)
 
-    def residuals(self, ku, kv, ctrl):
+    def residuals(self, ku, kv, ctrl, tol):
+        """(n,) parametric residuals, replaced by foot-point distances where they exceed `tol` when that
+        can decide whether the statistic holds: not when few enough exceed it already, nor when the foot
+        points of a sample of them (`_SAMPLE`) leave too many above it still (the net is refined
+        either way, and the parametric residuals, upper bounds, show where)."""
         p = self.degree
         if self.grid is not None:
             Bu, Bv = design_matrix(self.ug, ku, p), design_matrix(self.vg, kv, p)
-            return _grid_distance(Bu, Bv, ctrl, self.planes)
-        return np.linalg.norm(ScatteredBasis.build(self.u, self.v, ku, kv, p, p).evaluate(ctrl) - self.data, axis=1)
+            res = _grid_distance(Bu, Bv, ctrl, self.planes)
+        else:
+            res = np.linalg.norm(ScatteredBasis.build(self.u, self.v, ku, kv, p, p).evaluate(ctrl) - self.data, axis=1)
+        far = np.flatnonzero(res > tol)
+        allowed = 0 if self.statistic == "max" else int((1 - float(self.statistic[1:]) / 100) * (len(res) - 1))
+        if len(far) <= allowed:
+            return res
+        from rgm.geometry import NurbsSurface
+
+        surface = NurbsSurface(p, p, ku, kv, ctrl, None)
+
+        def feet(idx):
+            return foot_distances(surface, np.c_[self.u[idx], self.v[idx]], self.data[idx], res[idx], self.within_data)
+
+        if len(far) > _SAMPLE:
+            probe = far[:: len(far) // _SAMPLE]
+            if np.mean(feet(probe) > tol) * len(far) > 1.5 * allowed + 1:
+                return res
+        res[far] = feet(far)
+        return res
+
+    def within_data(self, uv: np.ndarray) -> np.ndarray:
+        """(k,) bool: parameters uv (k, 2) in the pixel of some data point (within half a data spacing of
+        its parameters along u and along v): inside the data's region, whose pixel contour the trimming
+        loops follow (a foot point beyond it would be trimmed away: the certificate does not measure to it).
+        A grid looks the pixel up; scattered data ask a k-d tree of their parameters."""
+        if self.lines is not None:
+            inside = np.ones(len(uv), bool)
+            index = []
+            for t, x in zip((self.ug, self.vg), uv.T):
+                half = 0.5 * np.diff(t)
+                edges = np.r_[t[0] - half[0], t[:-1] + half, t[-1] + half[-1]]   # pixel borders
+                i = np.searchsorted(edges, x, side="right") - 1
+                inside &= (i >= 0) & (i < len(t))
+                index.append(np.clip(i, 0, len(t) - 1))
+            return inside & self.mask[index[0], index[1]]
+        if not hasattr(self, "_tree"):
+            from scipy.spatial import cKDTree
+
+            uv0 = np.c_[self.u, self.v]
+            self._scale = 1.0 / max(float(np.median(cKDTree(uv0).query(uv0, k=2)[0][:, 1])), 1e-300)
+            self._tree = cKDTree(uv0 * self._scale)
+        return self._tree.query(uv * self._scale, p=np.inf, distance_upper_bound=0.5)[0] <= 0.5
 
     def worst_per_direction(self, res):
         """(params_u, worst_u, params_v, worst_v): each data line's worst residual for the span search
@@ -128,8 +185,8 @@ class _SurfaceProblem:
 
 def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
                 n_initial: int | None = None, max_ctrl: int = 40000, statistic: str = "max",
-                smoothing: float = 1e-7, prune: int = 8, min_lines: float = 2.0,
-                data_per_ctrl: float = 4.0) -> SurfaceFit:
+                smoothing: float = SMOOTHING, prune: int = 8, min_lines: float = 1.0,
+                data_per_ctrl: float = DATA_PER_CTRL) -> SurfaceFit:
     """Least-squares bicubic (by default) B-spline surface of `points` refined by knot insertion.
 
     points: (n, 3) scattered points, or a grid (rows, cols, 3) with optional `mask` (rows, cols) of valid
@@ -137,6 +194,8 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
     params: optional parameters (u, v): per grid row and column for a grid, per point otherwise.
     tol: tolerance in model units for the `statistic` ("max", or "p99" etc. for scans whose noise makes
         a maximum meaningless) of the parametric residuals.
+    smoothing: the weight per data point of the surface's bending energy at the approximation limit
+        (`rgm.fitters.freeform.solve_scattered`: coarser nets get less).
     Refinement stops when the statistic is met; when every span that exceeds the tolerance holds fewer
     than 2 `min_lines` data lines, or the net would exceed one control point per `data_per_ctrl` data
     points (see the module docstring); or when the net would exceed `max_ctrl` (the last step then
@@ -146,17 +205,17 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
     knots whose neighbourhood is far inside the tolerance are removed in one batch, and up to `prune`
     single knots, quietest first, each only when the fit still holds without it.
     """
-    prob = _SurfaceProblem(points, mask, params, degree, smoothing)
+    prob = _SurfaceProblem(points, mask, params, degree, smoothing, statistic)
     limit = max((degree + 1) ** 2, int(len(prob.data) / data_per_ctrl))
     ku = kv = uniform_knots(degree, n_initial or initial_net_size(*prob.char, degree, len(prob.data)))
     prev, history, stopped, step, final = None, [], "", None, ""
     while True:
-        ctrl, res = prob.solve(ku, kv)
+        ctrl, res = prob.solve(ku, kv, tol)
         value = statistic_value(res, statistic)
         if prev is not None and value > prev[3]:  # keep the refined previous shape
             ctrl = np.einsum("ia,abd,jb->ijd", refinement_matrix(prev[1], ku, degree), prev[0],
                              refinement_matrix(prev[2], kv, degree), optimize=True)
-            res = prob.residuals(ku, kv, ctrl)
+            res = prob.residuals(ku, kv, ctrl, tol)
             value = statistic_value(res, statistic)
         history.append((ctrl.shape[0] * ctrl.shape[1], value))
         if value <= tol or final:
@@ -199,7 +258,7 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
             take = order[:mid]
             ku2 = np.sort(np.r_[prev[1], cu[take[take < len(cu)]]])
             kv2 = np.sort(np.r_[prev[2], cv[take[take >= len(cu)] - len(cu)]])
-            ctrl2, res2 = prob.solve(ku2, kv2)
+            ctrl2, res2 = prob.solve(ku2, kv2, tol)
             value2 = statistic_value(res2, statistic)
             if value2 <= tol:
                 hi = mid
@@ -268,7 +327,7 @@ def _prune(prob, ku, kv, ctrl, res, tol, statistic, attempts, slack=0.4):
             drop_u, drop_v = ((bu[i],), ()) if i < len(bu) else ((), (bv[i - len(bu)],))
             tried.add((i < len(bu), float(bu[i] if i < len(bu) else bv[i - len(bu)])))
         ku2, kv2 = _without(ku, prob.degree, drop_u), _without(kv, prob.degree, drop_v)
-        ctrl2, res2 = prob.solve(ku2, kv2)
+        ctrl2, res2 = prob.solve(ku2, kv2, tol)
         if statistic_value(res2, statistic) <= tol:
             ku, kv, ctrl, res = ku2, kv2, ctrl2, res2
     return ku, kv, ctrl, res
@@ -286,3 +345,4 @@ def _grid_distance(Bu, Bv, ctrl, planes):
         np.square(d, out=d)
         total = d if total is None else np.add(total, d, out=total)
     return np.sqrt(total, out=total).ravel()
+

@@ -156,6 +156,17 @@ def _freeform_parts(points, idx, grid, name, suffix, tol, statistic):
     return parts, ff.info, [f"{name}: {n}" for n in ff.notes]
 
 
+def _beyond_its_points(entry: dict, cert) -> str:
+    """Why a free-form patch whose surface met the tolerance on the points it was fitted to has a
+    certificate that does not hold: the certificate counts every filtered point nearest to the patch,
+    among them points no patch was fitted to (pixels at depth jumps and creases, specks) and points of
+    a neighbour nearer to this patch than to their own."""
+    r = entry["residual"]
+    return (f"met on the {entry['points']} points the surface was fitted to ({r['statistic']} "
+            f"{r['value']:.4f} mm), not on all {cert.points} nearest to it: the others lie at depth jumps, "
+            f"creases or specks that no patch models, or belong to a neighbour")
+
+
 def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), options=None, stages=None,
                seed: int = 0, title: str = "part", grid=None) -> FitResult:
     """Fit already filtered, registered points (n, 3) in mm: split, classify, build, certify, emit.
@@ -229,6 +240,8 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
                 continue
             cov = surface_coverage(_surface_samples(part.ideal, 2 * pitch), points, 4 * pitch)
             cert = certify(dist[owner == k], tol, statistic=statistic, coverage=cov)
+            if not cert.holds and not stopped and "residual" in entry:   # a patch whose own fit held
+                stopped = entry["stopped"] = _beyond_its_points(entry, cert)
             part.annotations = annotations(cls, cert, list(sources), stopped)
             entry["certificate"] = cert.as_dict()
             certificates.append(cert)

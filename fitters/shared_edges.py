@@ -46,6 +46,7 @@ __all__ = ["SharedEdge", "share_boundaries", "rebuild_loop", "measure_shared"]
 
 _BRANCH = 4001        # samples of a branch for matching runs and joins
 _TANGENT_DEG = 20.0   # surfaces meeting at less than this along a seam are not intersected
+_EDGE_UV = 1e-6       # a branch this close (parameter units) to a domain edge is clamped to it, not crossing
 _MIN_AREA_RATIO = 0.8
 
 
@@ -217,6 +218,12 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
     if length < 4 * spacing:
         return f"the shared stretch would be {length:.2f} mm long, under four point spacings"
     uv = {i: br.uv_a.evaluate(t), j: br.uv_b.evaluate(t)}
+    for a, surface in ((i, si), (j, sj)):   # a branch clamped to a domain edge only approximates a crossing
+        (u0, u1), (v0, v1) = surface.domain
+        w = uv[a][lo:hi + 1]
+        if np.any((w <= np.array([u0, v0]) + _EDGE_UV) | (w >= np.array([u1, v1]) - _EDGE_UV)):
+            return (f"their intersection runs along the edge of surface {a + 1}'s domain: the surfaces do not "
+                    f"cross there, they only come within the tolerance")
     return _Candidate(i, j, xyz, uv, lo, hi, runs, rising, branches)
 
 

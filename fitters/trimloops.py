@@ -276,11 +276,25 @@ class TrimLoops:
     notes: tuple = ()   # what was done to keep the loops valid (said in the fit's notes)
 
 
+#: how far (in pixels) the loops run beyond a grid's outermost rows and columns, where the contour (half a
+#: pixel out) meets the image border: the data there stay inside the trim, the loops inside the domain
+BORDER_REACH = 0.25
+
+
+def _along(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Parameters at fractional pixel positions x along one grid direction with parameters t (n,)
+    (increasing): linear between pixels, extended by the end steps up to BORDER_REACH beyond the ends."""
+    n = len(t)
+    x = np.clip(x, -BORDER_REACH, n - 1 + BORDER_REACH)
+    y = np.interp(x, np.arange(n), t)
+    if n > 1:
+        y = np.where(x < 0, t[0] + x * (t[1] - t[0]), y)
+        y = np.where(x > n - 1, t[-1] + (x - (n - 1)) * (t[-1] - t[-2]), y)
+    return y
+
+
 def _to_uv(poly_px, u_of_row, v_of_col):
-    rows, cols = len(u_of_row), len(v_of_col)
-    r = np.clip(poly_px[:, 0], 0, rows - 1)
-    c = np.clip(poly_px[:, 1], 0, cols - 1)
-    return np.c_[np.interp(r, np.arange(rows), u_of_row), np.interp(c, np.arange(cols), v_of_col)]
+    return np.c_[_along(poly_px[:, 0], u_of_row), _along(poly_px[:, 1], v_of_col)]
 
 
 def _snapped(raw: list[np.ndarray], tree, rounds: int = 200) -> tuple[list[np.ndarray], int]:
@@ -380,7 +394,7 @@ def _fit_valid(polys: list[np.ndarray], tol_uv: float, degree: int, lo, hi, roun
 
 
 def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_pixels: int = 20,
-                   degree: int = 3, snap_to=None) -> TrimLoops:
+                   degree: int = 3, snap_to=None, domain=None) -> TrimLoops:
     """Fit the boundary of `mask` (rows, cols) with closed B-spline loops in (u, v).
 
     u_of_row (rows,), v_of_col (cols,): the parameters of the grid rows and columns.
@@ -390,6 +404,8 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
     snap_to: optional data parameters (k, 2); each contour vertex then moves to its nearest data point,
     so a rasterised boundary follows the data rather than the raster's staircase (except where that would
     make the loops cross or touch).
+    domain: optional ((u0, u1), (v0, v1)), the surface's: the loops stay in it. Where the contour meets
+    the grid's border they run BORDER_REACH pixels beyond the outermost rows and columns (within the domain).
 
     The loops are valid (`check_loops`): each simple, the holes inside the outer boundary and apart from it
     and each other. Pieces whose fit would cross are fitted tighter (or as the contour itself); `notes` say so.
@@ -414,9 +430,12 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
         notes.append(f"{len(pinched)} piece(s) of data ({int(np.isin(lab, pinched).sum())} cells) touching the "
                      f"face only at a cell corner (a pinch) are left outside its trim")
 
-    lo = np.array([np.min(u_of_row), np.min(v_of_col)])
-    hi = np.array([np.max(u_of_row), np.max(v_of_col)])
     u_of_row, v_of_col = np.asarray(u_of_row, float), np.asarray(v_of_col, float)
+    ends = np.array([[-BORDER_REACH, len(u_of_row) - 1 + BORDER_REACH], [-BORDER_REACH, len(v_of_col) - 1 + BORDER_REACH]])
+    (lo_u, hi_u), (lo_v, hi_v) = _along(ends[0], u_of_row), _along(ends[1], v_of_col)
+    lo, hi = np.array([lo_u, lo_v]), np.array([hi_u, hi_v])
+    if domain is not None:
+        lo, hi = np.maximum(lo, np.asarray(domain, float)[:, 0]), np.minimum(hi, np.asarray(domain, float)[:, 1])
     chosen = [polys[outer_i]] + [p for i, p in enumerate(polys) if i != outer_i and np.sign(areas[i]) != outer_sign]
     raw = [_distinct(_to_uv(p, u_of_row, v_of_col)) for p in chosen]
     if snap_to is not None:

@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 from rgm.errors import GeometryError
 from rgm.fitters.freeform import (design_matrix, fit_curve, fit_surface, refinement_matrix, solve_grid,
                                   uniform_knots)
+from rgm.geometry.inversion import closest_point_surface
 
 SETTINGS = settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -30,7 +31,7 @@ def smooth_grid(seed, rows=120, cols=100, noise=0.0):
 def uniform_fit_error(grid, n, degree=3):
     k = uniform_knots(degree, n)
     u, v = np.linspace(0, 1, grid.shape[0]), np.linspace(0, 1, grid.shape[1])
-    ctrl, Bu, Bv = solve_grid(u, v, grid, k, k, degree, degree, 1e-7)
+    ctrl, Bu, Bv = solve_grid(u, v, grid, k, k, degree, degree)
     surf = np.einsum("ia,abd,jb->ijd", Bu.toarray(), ctrl, Bv.toarray())
     return np.linalg.norm(surf - grid, axis=2).max()
 
@@ -45,11 +46,18 @@ def test_surface_meets_tolerance_and_error_never_rises(seed):
     assert fit.stats.max <= tol
     values = [v for _, v in fit.history]
     assert all(b <= a + 1e-12 for a, b in zip(values, values[1:])), values
-    # the certificate is measured, not estimated: re-evaluate the surface on the data
+    # the certificate is measured, not estimated: each residual is the parametric one re-evaluated here,
+    # or, where that exceeds the tolerance, a distance to the surface between the true closest-point
+    # distance (rgm.geometry's global search) and the parametric one
     Bu = design_matrix(np.linspace(0, 1, grid.shape[0]), fit.knots_u, 3).toarray()
     Bv = design_matrix(np.linspace(0, 1, grid.shape[1]), fit.knots_v, 3).toarray()
-    dev = np.linalg.norm(np.einsum("ia,abd,jb->ijd", Bu, fit.ctrl, Bv) - grid, axis=2)
-    assert np.isclose(dev.max(), fit.stats.max, rtol=1e-9)
+    dev = np.linalg.norm(np.einsum("ia,abd,jb->ijd", Bu, fit.ctrl, Bv) - grid, axis=2).ravel()
+    near = dev <= tol
+    assert np.allclose(fit.residuals[near], dev[near], rtol=1e-9, atol=1e-12)
+    assert np.all(fit.residuals <= dev + 1e-12) and fit.stats.max == fit.residuals.max()
+    if not near.all():
+        exact = closest_point_surface(fit.nurbs(), grid.reshape(-1, 3)[~near])[3]
+        assert np.all(fit.residuals[~near] >= exact - 1e-9)
 
 
 @settings(max_examples=5, deadline=None)
@@ -117,37 +125,55 @@ def test_bad_point_sets_are_refused(bad):
         fit_surface(bad, 0.1)
 
 
-def test_the_approximation_limit_is_where_a_finer_net_starts_chasing_the_samples():
-    """Never chase noise, measured: on the face scan (3.3-4.4 mm pitch; tests/data/fran) the fit at T =
-    0.4 mm stops at its approximation limit, short of T. Letting it refine down to one data line a span
-    and one control point per data point reaches T on its own points, but five-fold cross-validation (each fifth of the points fitted without
-    it, on the same knots) shows that net predicting the withheld points far worse: it models the samples,
-    not the face."""
+def _face_grid():
+    """The face scan's range grid (mm; tests/data/fran, VTK example data) without the statistical
+    outliers `rgmc fit` filters out: (grid (rows, cols, 3), mask, filtered points (n, 3))."""
     from pathlib import Path
 
-    from rgm.fitters.freeform import ScatteredBasis, grid_parameters, solve_scattered
-    from rgm.fitters.freeform_part import grid_from_mesh
     from rgm.fitters.io import read_scan
+    from rgm.fitters.pipeline import filtered_points
 
     scan = read_scan(Path(__file__).resolve().parents[1] / "data" / "fran" / "fran_cut.ply")
-    grid = grid_from_mesh(scan.points * 1000.0, scan.faces)
-    u, v = grid_parameters(grid)
-    limited = fit_surface(grid, 0.4, params=(u, v), statistic="p95")
-    chasing = fit_surface(grid, 0.4, params=(u, v), statistic="p95", min_lines=1, data_per_ctrl=1)
-    assert not limited.stats.holds and "approximation limit" in limited.stopped
-    assert chasing.stats.holds and chasing.n_ctrl > limited.n_ctrl
+    points, cells, _ = filtered_points([scan], 1000.0)
+    mask = cells >= 0
+    grid = np.full(cells.shape + (3,), np.nan)
+    grid[mask] = points[cells[mask]]
+    return grid, mask, points
 
-    uu, vv = np.meshgrid(u, v, indexing="ij")
-    uu, vv, pts = uu.ravel(), vv.ravel(), grid.reshape(-1, 3)
-    fold = np.random.default_rng(0).integers(0, 5, len(pts))
 
-    def withheld_p95(fit):
-        res = np.empty(len(pts))
-        for f in range(5):
-            keep = fold != f
-            ctrl, _ = solve_scattered(uu[keep], vv[keep], pts[keep], fit.knots_u, fit.knots_v, 3, 3, 1e-7)
-            basis = ScatteredBasis.build(uu[~keep], vv[~keep], fit.knots_u, fit.knots_v, 3, 3)
-            res[~keep] = np.linalg.norm(basis.evaluate(ctrl) - pts[~keep], axis=1)
-        return np.percentile(res, 95)
+def test_the_face_mask_meets_0_4mm_and_follows_the_face_between_its_samples():
+    """The paper's face mask at its 3.3-4.4 mm scan-line pitch: the fit meets T = 0.4 mm (p95 of the
+    closest-point distances, measured here by the independent closest-point search of the certificate)
+    with fewer control points than half the data. Not by oscillating through the samples: between them,
+    at the centres of the scanner's own mesh cells, the surface is nearer that mesh than the fit stopped at
+    a quarter of the data (the former limit), by every figure (p95, max, RMS)."""
+    from rgm.fitters.freeform import grid_parameters
+    from rgm.fitters.freeform_measure import TrimmedNurbs
 
-    assert withheld_p95(chasing) > 3 * withheld_p95(limited)
+    grid, mask, points = _face_grid()
+    params = grid_parameters(np.where(mask[..., None], grid, 0.0), mask)
+    fit = fit_surface(grid, 0.4, mask=mask, params=params, statistic="p95")
+    coarse = fit_surface(grid, 0.4, mask=mask, params=params, statistic="p95", data_per_ctrl=4, min_lines=2)
+    assert fit.stats.holds and fit.n_ctrl < len(points) / 2, (fit.stopped, fit.ctrl.shape)
+    assert not coarse.stats.holds and "approximation limit" in coarse.stopped
+    d = TrimmedNurbs(fit.nurbs()).inner_distance(points)
+    assert np.percentile(d, 95) <= 0.4 + 1e-9
+
+    cells = mask[:-1, :-1] & mask[1:, :-1] & mask[:-1, 1:] & mask[1:, 1:]
+    centres = (0.25 * (grid[:-1, :-1] + grid[1:, :-1] + grid[:-1, 1:] + grid[1:, 1:]))[cells]
+
+    def between(f):
+        e = TrimmedNurbs(f.nurbs()).inner_distance(centres)
+        return np.array([np.percentile(e, 95), e.max(), np.sqrt(np.mean(e * e))])
+
+    assert np.all(between(fit) < between(coarse)), (between(fit), between(coarse))
+
+
+def test_a_tolerance_below_the_noise_is_not_met_by_absorbing_the_noise():
+    """Noise of 0.3 mm (its p95 0.59 mm) and T = 0.35 mm on the p95: no surface meets that honestly. At one
+    control point per two data points the least-squares residual keeps half the noise variance, so the
+    fit stops at the approximation limit and says so instead of interpolating the noise."""
+    grid = smooth_grid(5, rows=60, cols=50, noise=0.3)
+    fit = fit_surface(grid, 0.35, statistic="p95")
+    assert not fit.stats.holds and "approximation limit" in fit.stopped
+    assert fit.stats.value > 0.35

@@ -194,13 +194,16 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
 
         write_step(model, tmp_path / "mustard.step", tol=1.0)
     # the printed (rounded) trimmed surface of the largest patch is as close to its points as the fit said
-    assert np.percentile(parts[0].ideal.distance(p[result.patches[0].indices[::10]]), 95) <= 1.0
+    # (all of them: the fit stops as soon as its p95 holds, so a sample's p95 may lie either side of 1 mm)
+    assert np.percentile(parts[0].ideal.distance(p[result.patches[0].indices]), 95) <= 1.0
     gaps = np.array([g.max for g in result.gaps])
     assert len(gaps) >= len(result) - 1 and np.all(np.isfinite(gaps))
     # the cap and shoulder creases are shared where the surfaces cross: within the tolerance along the
     # edge, several times closer than the separate trims were; every pair not shared says why
+    # (a crease along which one surface's domain ends is not shared: an exact intersector, OpenCASCADE's,
+    # finds the surfaces apart there, see shared_edges._candidate)
     shared = [g for g in result.gaps if g.shared]
-    assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
+    assert len(shared) >= 2 and all(g.max <= 1.0 for g in shared)
     assert max(g.max for g in shared) < 0.5 * min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
     for g in shared:   # one binding, used by both faces' loops
