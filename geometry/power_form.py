@@ -3,58 +3,74 @@
 On each non-empty knot span (span pair) the basis functions are polynomials; their coefficients, combined
 with the control points (homogeneous, for rational forms), give per-span polynomial coefficients, so a
 point and its first derivatives are a span lookup and a Horner evaluation: no basis recursion per call.
-The values agree with `rgm.geometry`'s evaluators to round-off (about 1e-11 relative; tested in
+The polynomials are Taylor expansions about the span midpoints (`_span_matrices`), so points and
+first derivatives agree with `rgm.geometry`'s evaluators to round-off on spans of any length (tested in
 tests/backends/test_mesh_tessellate.py). Parameters are clipped into the domain, not validated: this is
 for internal hot paths (the mesher's refinement), not for user input. Degrees above _POWER_MAX_DEGREE
-are left to the exact evaluators (the Vandermonde solve loses accuracy).
+are left to the exact evaluators.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from rgm.geometry.basis import basis_functions_t
+from rgm.geometry.basis import basis_derivatives_t
 
 __all__ = ["power_form"]
 
-#: highest degree converted to the per-span power form (the Vandermonde solve stays well conditioned)
+#: highest degree converted to the per-span power form; higher degrees use the exact evaluators (the
+#: Taylor form itself measured as accurate as those up to degree 9, at a few 1e-15 of |S'|)
 _POWER_MAX_DEGREE = 7
 #: parameter pairs per block of the power-form evaluator (the gathered coefficients stay in cache)
 _POWER_CHUNK = 4096
 
 
 def _span_matrices(knots, degree):
-    """(breaks (s+1,), M (s, p+1, p+1)): on non-empty span k the basis functions N_{span-p+r} are
-    sum_a M[k, r, a] x^a with x = (t - breaks[k]) / (breaks[k+1] - breaks[k]); spans (s,) knot indices."""
+    """(breaks (s+1,), M (s, p+1, p+1), spans (s,) knot indices): on non-empty span k the basis functions
+    N_{span-p+r} are sum_a M[k, r, a] x^a with x = (t - c) / h in [-1/2, 1/2], c and h the span's
+    midpoint and length.
+
+    M is the Taylor expansion about the midpoint, M[k, r, a] = h^a / a! N_r^(a)(c), from the basis
+    derivatives (A2.3): every coefficient carries rounding relative to its own size (about h^a times an
+    a-th derivative), so d/dt = (1/h) d/dx is as accurate as A2.3's on a span of any length. Coefficients
+    interpolated from values at nodes of the span (a Vandermonde solve) carry rounding of the size of the
+    values in every coefficient, which the 1/h amplifies: Su off by 2e-9 (exact 41) on a degree-5 span
+    5e-4 long (seed 124 of the power-form test in tests/backends/test_mesh_tessellate.py). The midpoint
+    keeps |x|^a <= 2^-a: expanded about the span's start (x in [0, 1]) the coefficients are larger, and
+    the long spans of that surface lost 7e-12 in Su and 6e-13 in the points (6e-14 and 5e-15 here)."""
     p = degree
     knots = np.asarray(knots, float)
     lo, hi = knots[p], knots[len(knots) - p - 1]
     breaks = np.unique(knots[(knots >= lo) & (knots <= hi)])
     spans = np.searchsorted(knots, breaks[:-1], side="right") - 1
-    x = np.linspace(0.0, 1.0, p + 1)
-    vander_inv = np.linalg.inv(np.vander(x, p + 1, increasing=True))        # values at x -> coefficients
-    t = breaks[:-1, None] + np.diff(breaks)[:, None] * x[None, :]            # (s, p+1)
-    values = basis_functions_t(knots, p, t.ravel(), np.repeat(spans, p + 1))  # (p+1 functions, s*(p+1))
-    values = values.reshape(p + 1, len(spans), p + 1).transpose(1, 0, 2)     # (s, r, node)
-    return breaks, np.einsum("srn,an->sra", values, vander_inv), spans
+    ders = basis_derivatives_t(knots, p, _midpoints(breaks), p, spans)      # (a, r, s)
+    a = np.arange(p + 1)
+    scale = np.diff(breaks)[None, :] ** a[:, None] / np.cumprod(np.maximum(a, 1))[:, None]   # h^a / a!
+    return breaks, (ders * scale[:, None, :]).transpose(2, 1, 0), spans
+
+
+def _midpoints(breaks):
+    """The midpoints (s,) of the spans between breaks (s+1,): the expansion points of the power form."""
+    return 0.5 * (breaks[:-1] + breaks[1:])
 
 
 class _Spans:
     """The breaks of one parameter direction, set up once for `locate`: the inner breaks (a searchsorted
-    over them gives the span with no clipping of the result) and the reciprocal span lengths."""
+    over them gives the span with no clipping of the result), the span midpoints and the reciprocal span
+    lengths."""
 
     def __init__(self, breaks):
-        self.breaks = breaks
         self.lo, self.hi = float(breaks[0]), float(breaks[-1])
         self.inner = np.ascontiguousarray(breaks[1:-1])
+        self.mid = _midpoints(breaks)
         self.inv = 1.0 / np.diff(breaks)
 
     def locate(self, t):
-        """(span (m,), local x (m,) in [0, 1], 1 / span length (m,)) of parameters t (m,) clipped into
+        """(span (m,), local x (m,) in [-1/2, 1/2], 1 / span length (m,)) of parameters t (m,) clipped into
         [breaks[0], breaks[-1]] (np.minimum/np.maximum: np.clip's dispatch costs more on small arrays)."""
         t = np.minimum(np.maximum(t, self.lo), self.hi)
         k = np.searchsorted(self.inner, t, side="right")
         inv = self.inv[k]
-        return k, (t - self.breaks[k]) * inv, inv
+        return k, (t - self.mid[k]) * inv, inv
 
 
 def _horner(c, x, n):
