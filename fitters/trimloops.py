@@ -431,9 +431,8 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
                      f"face only at a cell corner (a pinch) are left outside its trim")
 
     u_of_row, v_of_col = np.asarray(u_of_row, float), np.asarray(v_of_col, float)
-    ends = np.array([[-BORDER_REACH, len(u_of_row) - 1 + BORDER_REACH], [-BORDER_REACH, len(v_of_col) - 1 + BORDER_REACH]])
-    (lo_u, hi_u), (lo_v, hi_v) = _along(ends[0], u_of_row), _along(ends[1], v_of_col)
-    lo, hi = np.array([lo_u, lo_v]), np.array([hi_u, hi_v])
+    corners = np.array([[-BORDER_REACH] * 2, [len(u_of_row) - 1 + BORDER_REACH, len(v_of_col) - 1 + BORDER_REACH]])
+    lo, hi = _to_uv(corners, u_of_row, v_of_col)
     if domain is not None:
         lo, hi = np.maximum(lo, np.asarray(domain, float)[:, 0]), np.minimum(hi, np.asarray(domain, float)[:, 1])
     chosen = [polys[outer_i]] + [p for i, p in enumerate(polys) if i != outer_i and np.sign(areas[i]) != outer_sign]
