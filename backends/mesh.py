@@ -31,6 +31,7 @@ from rgm.errors import BackendError
 from .mesh_cdt import Incremental, OnSegment, constrained_delaunay, inside_loops
 from .mesh_edges import CERTIFY, Edges, segment_distance
 from .mesh_faces import collect_faces
+from .mesh_planar import plane_frame, simple_loops
 
 
 def _lattice(steps: int):
@@ -119,9 +120,15 @@ class _FaceMesher:
         gu, gv = face.grid
         uu, vv = np.meshgrid(gu[1:-1], gv[1:-1], indexing="ij")
         self.interior = self._clear_of_boundary(np.column_stack([uu.ravel(), vv.ravel()]))
+        self.frame = plane_frame(face.patch, tol)
+        if self.frame is None:
+            self._split_long()
+
+    def _split_long(self):
+        """Request splits of the boundary segments longer than LONGEST_SEGMENT grid cells."""
         p = self.scaled(self.b_uv)
         long = np.linalg.norm(p[self.segments[:, 1]] - p[self.segments[:, 0]], axis=1) > LONGEST_SEGMENT
-        self.requests = self._refs(np.flatnonzero(long))
+        self.requests |= self._refs(np.flatnonzero(long))
 
     def _boundary(self):
         """Boundary samples (uv, vertex ids), loops and segments from the current edge sampling."""
@@ -185,9 +192,34 @@ class _FaceMesher:
         keep = far & inside_loops(q, [p[lp] for lp in self.loops])
         return cand[keep]
 
+    def _flat(self) -> bool:
+        """Triangulate a planar face in its plane from its boundary samples alone (`mesh_planar`); False
+        when its loops make no valid polygon there (the face is then meshed in (u, v) as any other)."""
+        o, e1, e2 = self.frame
+        xyz = self.edges.coords()[self.b_ids]
+        loops = [lp[k] for lp in self.loops for k in simple_loops(self.b_ids[lp])]
+        if not loops:
+            return False
+        used = np.concatenate(loops)
+        local = np.full(len(xyz), -1)
+        local[used] = np.arange(len(used))
+        segments = np.concatenate([np.column_stack([local[lp], np.roll(local[lp], -1)]) for lp in loops])
+        try:
+            tri = constrained_delaunay((xyz[used] - o) @ np.column_stack([e1, e2]), segments,
+                                       [local[lp] for lp in loops])
+        except BackendError:
+            return False
+        self.tri_local, self.xyz, self.uv = used[tri], xyz, self.b_uv
+        return True
+
     def run(self):
         from scipy.spatial import cKDTree
 
+        if self.frame is not None:
+            if self._flat():
+                return
+            self.frame = None
+            self._split_long()
         patch, nb = self.face.patch, None
         for _ in range(MAX_PASSES):
             if self.requests:   # split the boundary segments that failed and take up the new sampling

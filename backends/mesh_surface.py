@@ -11,9 +11,10 @@ NURBS patches and revolution profiles are evaluated in per-span power form
 (`rgm.geometry.power_form`: a span lookup and Horner steps, for the many small calls of refinement).
 
 `Patch.project(points, uv0)` is Gauss-Newton on |S(u, v) - X|^2 from a starting guess (Piegl & Tiller
-§6.1, point inversion), clamped to the domain; `Patch.closest(points)` first picks the nearest node of a
-dense parameter grid (KD-tree) as the guess, so it finds the global closest point for points near the
-surface (within the grid spacing of it).
+§6.1, point inversion), clamped to the domain; `Patch.closest(points)` first picks the nearest nodes of a
+dense parameter grid (KD-tree) as guesses, so it finds the global closest point for points near the
+surface (within the grid spacing of it); a revolution adds a guess at the point's own angle about the
+axis (near a pole the nearest nodes are all the pole, where Gauss-Newton cannot turn).
 """
 from __future__ import annotations
 
@@ -53,7 +54,7 @@ class Patch:
         (u0, u1), (v0, v1) = sub.domain
         sub.breaks_u = np.unique(np.concatenate([[u0, u1], self.breaks_u[(self.breaks_u > u0) & (self.breaks_u < u1)]]))
         sub.breaks_v = np.unique(np.concatenate([[v0, v1], self.breaks_v[(self.breaks_v > v0) & (self.breaks_v < v1)]]))
-        sub._tree = None
+        sub._seeds_of = {}
         return sub
 
     def pieces(self) -> list:
@@ -105,24 +106,29 @@ class Patch:
         return uv, dist
 
     def closest(self, points, grid: int = 96, starts: int = 4):
-        """Global closest points: `project` from each of the `starts` nearest nodes of a grid x grid
-        parameter grid (KD-tree over their points), keeping the nearest result."""
+        """Global closest points: `project` from each seed (`_seeds`), keeping the nearest result."""
+        x = np.asarray(points, float)
+        seeds = self._seeds(x, grid, starts)                       # (m, k, 2)
+        k = seeds.shape[1]
+        uv, dist = self.project(np.repeat(x, k, axis=0), seeds.reshape(-1, 2), iterations=10)
+        pick = np.arange(len(x)) * k + np.argmin(dist.reshape(-1, k), axis=1)
+        return uv[pick], dist[pick]
+
+    def _seeds(self, x, grid, starts):
+        """(m, starts, 2): the `starts` nodes of a grid x grid parameter grid nearest to each point
+        (KD-tree over the nodes' points, built once)."""
         from scipy.spatial import cKDTree
 
-        if getattr(self, "_tree", None) is None:
+        cache = self.__dict__.setdefault("_seeds_of", {})   # per domain: `restrict` starts a new one
+        if "grid" not in cache:
             (u0, u1), (v0, v1) = self.domain
             gu = np.unique(np.concatenate([np.linspace(u0, u1, grid), self.breaks_u]))
             gv = np.unique(np.concatenate([np.linspace(v0, v1, grid), self.breaks_v]))
             uu, vv = np.meshgrid(gu, gv, indexing="ij")
             nodes = np.column_stack([uu.ravel(), vv.ravel()])
-            self._tree = (cKDTree(self.evaluate(nodes[:, 0], nodes[:, 1])), nodes)
-        tree, nodes = self._tree
-        x = np.asarray(points, float)
-        _, idx = tree.query(x, k=starts)
-        uv, dist = self.project(np.repeat(x, starts, axis=0), nodes[idx.ravel()], iterations=10)
-        best = np.argmin(dist.reshape(-1, starts), axis=1)
-        pick = np.arange(len(x)) * starts + best
-        return uv[pick], dist[pick]
+            cache["grid"] = (cKDTree(self.evaluate(nodes[:, 0], nodes[:, 1])), nodes)
+        tree, nodes = cache["grid"]
+        return nodes[tree.query(x, k=starts)[1].reshape(len(x), starts)]
 
 
 def _creases(knots, degree) -> np.ndarray:
@@ -200,6 +206,35 @@ class RevolutionPatch(Patch):
                           np.stack([dc[:, 0] * cos - dc[:, 1] * sin, dc[:, 0] * sin + dc[:, 1] * cos, dc[:, 2]], axis=1)])
         s, su, sv = local @ self.frame
         return s + self.a, su, sv
+
+    def _seeds(self, x, grid, starts):
+        """The grid's seeds and one from the meridian: u the point's angle about the axis (less the
+        profile's own), v the nearest of 8 grid profile samples in (distance from the axis, height).
+        Near a pole every grid node nearest to a point is the pole itself, from which Gauss-Newton
+        cannot turn (Su = 0 there); the meridian seed starts at the point's own angle."""
+        from scipy.spatial import cKDTree
+
+        generic = super()._seeds(x, grid, starts)
+        cache = self._seeds_of
+        if "meridian" not in cache:
+            (v0, v1) = self.domain[1]
+            vs = np.unique(np.concatenate([np.linspace(v0, v1, 8 * grid + 1), self.breaks_v]))
+            c, _ = self._profile(vs, 0)
+            rho = np.hypot(c[:, 0], c[:, 1])
+            theta = np.arctan2(c[:, 1], c[:, 0])
+            off = rho > 1e-12 * (rho.max() + np.abs(c[:, 2]).max())   # on the axis: the nearest sample's angle
+            if off.any():
+                k, i = np.flatnonzero(off), np.arange(len(vs))
+                right = k[np.minimum(np.searchsorted(k, i), len(k) - 1)]
+                left = k[np.maximum(np.searchsorted(k, i, side="right") - 1, 0)]
+                theta = theta[np.where(np.abs(i - left) <= np.abs(right - i), left, right)]
+            cache["meridian"] = (cKDTree(np.column_stack([rho, c[:, 2]])), vs, theta)
+        tree, vs, theta = cache["meridian"]
+        local = (x - self.a) @ self.frame.T
+        j = tree.query(np.column_stack([np.hypot(local[:, 0], local[:, 1]), local[:, 2]]))[1]
+        u = np.arctan2(local[:, 1], local[:, 0]) - theta[j]
+        u += 2 * np.pi * np.round((0.5 * sum(self.domain[0]) - u) / (2 * np.pi))   # the turn nearest the domain
+        return np.concatenate([generic, np.column_stack([u, vs[j]])[:, None]], axis=1)
 
     def evaluate(self, u, v):
         u = np.asarray(u, float)

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import assume, example, given, settings, strategies as st
 
 from rgm.backends.mesh_surface import NurbsPatch
-from rgm.backends.mesh import signed_volume, tessellate, tessellate_mesh, write_mesh
+from rgm.backends.mesh import mesh_deviation, signed_volume, tessellate, tessellate_mesh, write_mesh
 from rgm.errors import BackendError
 from rgm.geometry import NurbsCurve, NurbsSurface
 from rgm.model import BSplineCurve, BSplineSurface, Circle, Loop, Model, Polyline, Revolution, Shell, TrimmedFace
@@ -202,6 +202,83 @@ def test_pin_watertight_and_volume(tol):
     # not more triangles than needed: the cylinder needs n segments with r (1 - cos(pi / n)) <= tol
     n_min = int(np.ceil(np.pi / np.arccos(1 - tol / 27.15)))
     assert len(triangles) <= 10 * n_min
+    # the end disks are planar: triangulated from their rims alone, no vertex on the axis (a pole fan);
+    # their long triangles pass near the axis, where the closest-point oracle must still find the disk
+    assert np.hypot(vertices[:, 0], vertices[:, 2]).min() > 25.9
+    assert mesh_deviation(tessellate_mesh(model, tol)) <= tol
+
+
+def test_closest_point_near_a_pole_of_a_revolution():
+    """Points on the pin's end disk near the axis, at any angle: the closest point is the point itself
+    (the grid's nearest nodes are all the pole, where Gauss-Newton cannot turn; the meridian seed can)."""
+    from rgm.backends.mesh_surface import RevolutionPatch
+
+    pin = RevolutionPatch(Revolution(Polyline(PIN), [0, 0, 0], [0, 1, 0]))
+    cap = pin.restrict((pin.domain[0], (0.0, 0.2)))
+    rng = np.random.default_rng(3)
+    r, a = rng.uniform(0, 1.0, 400), rng.uniform(0, 2 * np.pi, 400)
+    x = np.column_stack([r * np.cos(a), np.zeros(400), r * np.sin(a)])
+    assert cap.closest(x)[1].max() < 1e-9
+    assert pin.closest(x)[1].max() < 1e-9
+
+
+def planar_surface(seed, degree=3, n=6):
+    """A NURBS patch lying exactly in a random plane (10 mm square), its (u, v) distorted in the plane
+    (a jittered control grid, rational for odd seeds): flat, but not parameterised by plane coordinates."""
+    rng = np.random.default_rng(seed)
+    knots = np.concatenate([np.zeros(degree + 1), np.sort(rng.uniform(0.1, 0.9, n - degree - 1)),
+                            np.ones(degree + 1)])
+    g = np.linspace(0, 10.0, n)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    flat = np.stack([x + rng.uniform(-0.6, 0.6, x.shape), y + rng.uniform(-0.6, 0.6, y.shape)], axis=-1)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    ctrl = flat @ q[:2] + rng.normal(size=3)
+    weights = rng.uniform(0.5, 2.0, (n, n)) if seed % 2 else None
+    return NurbsSurface(degree, degree, knots, knots, ctrl, weights)
+
+
+@settings(max_examples=25, deadline=None, database=None)
+@given(seed=st.integers(0, 10_000), tol=st.sampled_from([0.1, 0.01]))
+def test_planar_trimmed_face_is_its_boundary_polygon(seed, tol):
+    """A flat trimmed face (random plane, distorted (u, v), star-shaped outer loop, round hole) is
+    triangulated from its boundary samples alone: T = V + 2h - 2 triangles (no interior vertex), within
+    tol of the exact surface (measured), facing along Su x Sv, covering the trimmed area."""
+    rng = np.random.default_rng(seed)
+    nurbs = planar_surface(seed)
+    curve, outer = star_loop(rng, np.array([0.5, 0.5]))
+    assume(segment_distance(np.array([[0.5, 0.5]]), outer)[0] > 0.12)
+    face = TrimmedFace(BSplineSurface(nurbs), Loop((BSplineCurve(curve),)),
+                       (Loop((Circle(np.array([0.5, 0.5]), [0, 0, -1], 0.08),)),))
+    mesh = tessellate_mesh(face, tol)
+    v, t = mesh.vertices, mesh.triangles
+    assert len(t) == len(v) + 2 * 1 - 2
+    assert measured_deviation(v, t, nurbs) <= tol
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    _, su, sv = NurbsPatch(nurbs).d1(np.array([0.5]), np.array([0.5]))
+    assert (n @ np.cross(su, sv)[0] > 0).all()
+    fine = tessellate_mesh(face, tol / 10)
+    assert len(fine.triangles) == len(fine.vertices)  # still boundary-only: only the chords get closer
+    perimeter = sum(np.linalg.norm(np.diff(nurbs.evaluate(c[:, 0], c[:, 1]), axis=0), axis=1).sum()
+                    for c in (outer, 0.5 + 0.08 * np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 2001)),
+                                                                   np.sin(np.linspace(0, 2 * np.pi, 2001))])))
+    assert abs(area(v, t) - area(fine.vertices, fine.triangles)) <= tol * perimeter
+
+
+def test_planarity_is_decided_by_the_control_net():
+    """Coplanar control points (convex hull) make a face planar; a net 1 % of the tolerance out of its
+    plane does not, and neither does a cone (a revolution's profile not perpendicular to its axis)."""
+    from rgm.backends.mesh_planar import plane_frame
+    from rgm.backends.mesh_surface import RevolutionPatch
+
+    flat = planar_surface(7)
+    assert plane_frame(NurbsPatch(flat), 0.1) is not None
+    ctrl = flat.ctrl.copy()
+    ctrl[2, 3] += 1e-3 * np.cross(ctrl[0, 1] - ctrl[0, 0], ctrl[1, 0] - ctrl[0, 0]) / np.linalg.norm(
+        np.cross(ctrl[0, 1] - ctrl[0, 0], ctrl[1, 0] - ctrl[0, 0]))
+    assert plane_frame(NurbsPatch(NurbsSurface(3, 3, flat.knots_u, flat.knots_v, ctrl, flat.weights)), 0.1) is None
+    pin = RevolutionPatch(Revolution(Polyline(PIN), [0, 0, 0], [0, 1, 0]))
+    spans = [pin.restrict((pin.domain[0], (a, b))) for a, b in zip(pin.breaks_v[:-1], pin.breaks_v[1:])]
+    assert [plane_frame(p, 0.1) is not None for p in spans] == [True, False, False, False, True]
 
 
 def test_angle_tolerance_refines_normals():
