@@ -18,14 +18,15 @@ merged views of a closed or wrapped part:
    about the axis cut at the largest angular gap, v the height. A patch that wraps fully round (no gap)
    is split into two halves; a patch that fits neither base (a crease too soft to be found, such as a
    rounded bottom edge) is split into its mantle and its ends (normals across or along the cylinder
-   axis), or failing that across its longest extent. Both parameters are scaled to [0, 1]².
+   axis), or failing that across its longest extent. Both parameters are scaled to [0, 1]², then into
+   [m, 1 - m] (`reach_past`) so that the surface reaches 5 point spacings past its data on every side.
 3. Each patch is fitted by `fit_freeform` with those parameters (least squares, knot insertion to the
    tolerance, trimming loops from the occupied cells of (u, v)).
 4. Neighbouring patches share their boundary curve (`rgm.fitters.shared_edges`): the piece of each face's
    trimming loop along the crease with a neighbour becomes the same described intersection,
    `intersect(surface_i, surface_j)`, one binding used by both loops, joined to the rest of each loop
    (from its data, re-fitted from join to join) at two points on both surfaces. The least-squares surfaces
-   reach a little past their data, so near a crease they usually cross. G0 then holds by construction to
+   reach past their data (2.), so near a crease they usually cross. G0 then holds by construction to
    the intersection's approximation; it is measured, not assumed: along the shared edge as the back ends
    take it (each face's stretch of the branch approximated at the model tolerance, on its own surface,
    against the other face's). Where nothing is shared (surfaces meeting nearly tangentially, such as the
@@ -34,7 +35,10 @@ merged views of a closed or wrapped part:
    points sampled along one patch's trimming loop near the other patch projected onto the other patch's
    surface (closest points), of the order of the trim's distance from the data edge (a few point
    spacings), reported with the reason. The corners between two shared edges (a short data piece) are
-   not shared.
+   not shared. The two patches of a seam whose gap is still over the tolerance are fitted again at
+   half the tolerance (each surface nearer the crease data both approximate, so nearer each other; or
+   crossing where they did not) and the sharing and measurement are redone; that set is kept when more
+   seams are within the tolerance.
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
@@ -53,8 +57,8 @@ from rgm.fitters.freeform import design_matrix
 from rgm.fitters.freeform_part import FreeformShape, fit_freeform
 from rgm.fitters.normals import pca_normals
 
-__all__ = ["crease_mask", "split_scattered", "base_parameters", "Base", "PatchFit", "Gap", "PatchSet",
-           "fit_patches", "boundary_samples", "g0_gaps"]
+__all__ = ["crease_mask", "split_scattered", "base_parameters", "reach_past", "Base", "PatchFit", "Gap",
+           "PatchSet", "fit_patches", "boundary_samples", "g0_gaps"]
 
 
 def _points(points) -> np.ndarray:
@@ -231,6 +235,25 @@ def base_parameters(points, normals, *, max_angle: float = 75.0, spacing: float 
     return out
 
 
+def reach_past(points, u, v, reach: float, most: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
+    """Parameters u, v (n,) in [0, 1] moved into [m, 1 - m] (m per direction) so that the surface fitted
+    over [0, 1]² reaches about `reach` (model units) past its data on every side: two neighbours then
+    extend across their crease and cross there, with no domain edge clamping their intersection. m is
+    `reach` over the surface's speed in that direction (model units per parameter unit, the median of
+    least-squares Jacobians over each point's 8 nearest neighbours), at most `most`."""
+    points = np.asarray(points, float)
+    uv = np.c_[u, v]
+    k = min(9, len(points))
+    nb = cKDTree(points).query(points, k=k, workers=-1)[1][:, 1:]
+    dx, duv = points[nb] - points[:, None], uv[nb] - uv[:, None]             # (n, k-1, 3), (n, k-1, 2)
+    gram = np.einsum("nki,nkj->nij", duv, duv)
+    ok = np.linalg.det(gram) > 1e-12 * np.einsum("nii->n", gram) ** 2
+    jac = np.linalg.solve(gram[ok], np.einsum("nki,nkd->nid", duv[ok], dx[ok]))  # (m, 2, 3): dS/du, dS/dv
+    speed = np.median(np.linalg.norm(jac, axis=2), axis=0) if ok.any() else np.ones(2)
+    m = np.minimum(reach / np.maximum(speed, 1e-300), most)
+    return m[0] + (1 - 2 * m[0]) * uv[:, 0], m[1] + (1 - 2 * m[1]) * uv[:, 1]
+
+
 def _unit_box(uv):
     lo, hi = uv.min(axis=0), uv.max(axis=0)
     if np.any(hi - lo <= 0):
@@ -242,12 +265,14 @@ def _unit_box(uv):
 # ---------------------------------------------------------------------------------------- fitting
 @dataclass
 class PatchFit:
-    """One patch: the indices of its points in the input, its base surface, the trimmed fit, seconds."""
+    """One patch: the indices of its points in the input, its base surface, the trimmed fit, seconds, and
+    the parameters it was fitted over."""
 
     indices: np.ndarray
     base: Base
     shape: FreeformShape
     seconds: float
+    params: tuple = ()     # the (u, v) it was fitted over (`reach_past`), (n,) each
 
 
 @dataclass
@@ -293,7 +318,12 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
                 k: int = 16, max_ctrl: int = 4000, share: bool = True) -> PatchSet:
     """Split scattered points (n, 3) at their creases and fit each patch with a trimmed NURBS surface
     whose `statistic` of the residuals is within `tol` (model units); with `share`, neighbouring patches
-    share their boundary (the intersection of their surfaces) where they can; measure the G0 gaps."""
+    share their boundary (the intersection of their surfaces) where they can; measure the G0 gaps.
+
+    Each surface reaches 5 point spacings past its data (`reach_past`), so that neighbours cross at their
+    crease. With `share`, the patches of a seam whose gap is still over `tol` are fitted again at tol / 2
+    (each surface then nearer the crease's data that both approximate) and everything is shared and
+    measured again; the second round is kept when it brings more seams within `tol`."""
     points = _points(points)
     tree = cKDTree(points)
     spacing = _spacing(tree)
@@ -308,24 +338,45 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
         for sub, u, v, base in base_parameters(points[group], own, spacing=spacing):
             if len(sub) < 16:
                 continue
-            t0 = time.perf_counter()
+            params = reach_past(points[group[sub]], u, v, 5 * spacing)
             try:
-                shape = fit_freeform(points[group[sub]], tol, statistic=statistic, max_ctrl=max_ctrl,
-                                     cuts=False, params=(u, v))
+                patches.append(_fit_patch(points, group[sub], base, params, tol, statistic, max_ctrl))
             except GeometryError as exc:     # a sliver no surface or trim can be fitted to: said, not hidden
                 skipped.append(f"{len(sub)} points not fitted: {exc}")
-                continue
-            patches.append(PatchFit(group[sub], base, shape, time.perf_counter() - t0))
     patches.sort(key=lambda p: -len(p.indices))
-    for r, p in enumerate(patches, 1):   # what was done to keep a trim valid (pinches, narrow necks)
-        skipped += [f"patch {r} trim: {note}" for note in p.shape.loops.notes]
     assigned = sum(len(p.indices) for p in patches)
     gaps = g0_gaps(points, patches, 5 * spacing)
     if share:
         from rgm.fitters.shared_edges import share_boundaries
 
+        unshared = [p.shape for p in patches]
         gaps = share_boundaries(points, patches, gaps, tol, 5 * spacing, spacing)
+        # a seam still over the tolerance: its two patches fitted again at half of it, each then nearer the
+        # crease's data that both approximate; the set is shared and measured again, kept if it does better
+        loose = sorted({r for g in gaps if g.max > tol for r in (g.i, g.j)})
+        again = [PatchFit(q.indices, q.base, shape, q.seconds, q.params) for q, shape in zip(patches, unshared)]
+        for r in loose:
+            q = patches[r]
+            try:
+                tight = _fit_patch(points, q.indices, q.base, q.params, tol / 2, statistic, max_ctrl)
+            except GeometryError:
+                continue
+            if tight.shape.fit.stats.holds:
+                again[r] = tight
+        if any(a.shape is not b for a, b in zip(again, unshared)):
+            second = share_boundaries(points, again, g0_gaps(points, again, 5 * spacing), tol, 5 * spacing, spacing)
+            if sum(g.max <= tol for g in second) > sum(g.max <= tol for g in gaps):
+                patches, gaps = again, second
+    for r, p in enumerate(patches, 1):   # what was done to keep a trim valid (pinches, narrow necks)
+        skipped += [f"patch {r} trim: {note}" for note in p.shape.loops.notes]
     return PatchSet(patches, gaps, len(points) - assigned, skipped)
+
+
+def _fit_patch(points, indices, base, params, tol, statistic, max_ctrl) -> PatchFit:
+    """A PatchFit of points[indices] over `params` (u, v) at `tol`: the trimmed surface, timed."""
+    t0 = time.perf_counter()
+    shape = fit_freeform(points[indices], tol, statistic=statistic, max_ctrl=max_ctrl, cuts=False, params=params)
+    return PatchFit(indices, base, shape, time.perf_counter() - t0, params)
 
 
 def boundary_samples(shape: FreeformShape, per_piece: int = 60) -> np.ndarray:

@@ -12,20 +12,23 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
 1. The seam on each face: the longest run of samples of its outer loop whose nearest point outside the
    patch belongs to the neighbour (within `near`; gaps of a few samples with no neighbour closed).
 2. The surfaces are intersected (`rgm.geometry.intersect.intersect_surfaces`, at the model tolerance, as
-   the IntersectionCurve the file describes approximates it). The least-squares surfaces extend over their whole parameter square, a little past their
-   data, so near a crease they usually cross. The branch that both seams follow is taken (most run samples
+   the IntersectionCurve the file describes approximates it). The least-squares surfaces extend over their
+   whole parameter square, about 5 point spacings past their data (`rgm.fitters.patches.reach_past`), so
+   near a crease they usually cross. The branch that both seams follow is taken (most run samples
    within `near`, their order along the run matching the branch's); its stretch under the seams, the
    mean of the two faces' ends, is the shared edge, its ends the joins: one 3-D point each, seen on both
-   surfaces at the same branch parameter. Pairs whose surfaces meet nearly tangentially (the two halves of
-   a wrap, a soft crease) are not intersected, nor pairs with no branch along the seam, a closed branch
-   (which arc a loop keeps would be ambiguous), or a stretch of less than a few spacings: they keep their
-   separate trims, and the reason is reported with the measured gap.
+   surfaces at the same branch parameter. Pairs whose surfaces meet nearly tangentially (under
+   `_TANGENT_DEG`, 8 degrees, as the two halves of a wrap can) are not intersected, nor pairs with no
+   branch along the seam, a closed branch (which arc a loop keeps would be ambiguous), or a stretch of
+   less than a few spacings: they keep their separate trims, and the reason is reported with the measured
+   gap. A crease at 8 degrees or more is intersected; an unstable intersection fails its measurement (4.).
 3. Loops (`rebuild_loop`): the loop's run is replaced by a `SharedEdge` piece and the rest of the loop,
    from the data as before, is re-fitted from join to join (`rgm.fitters.trimloops.fit_open_chain`: split
    at corners, ends fixed on the joins) after dropping the data samples the shared edge covers. Two shared
    edges are never adjacent (a data piece lies between; the back ends need one). A loop that is not simple,
-   not counter-clockwise, leaves the domain or changes the trimmed area by more than 20 % drops that face's
-   shared edges (and its neighbours' rebuild).
+   not counter-clockwise, leaves the domain or changes the trimmed area by more than 20 % drops the one
+   shared edge without which that face's loop is valid, or else all of that face's shared edges (and the
+   neighbours' loops are rebuilt).
 4. Measurement (`measure_shared`): as the back ends see it, the model objects are built (the surfaces,
    one `IntersectionCurve` of both at the model tolerance, the loops) and each face's piece is the
    stretch of the approximated branch between its neighbouring pieces' ends
@@ -45,7 +48,7 @@ from rgm.errors import GeometryError
 __all__ = ["SharedEdge", "share_boundaries", "rebuild_loop", "measure_shared"]
 
 _BRANCH = 4001        # samples of a branch for matching runs and joins
-_TANGENT_DEG = 20.0   # surfaces meeting at less than this along a seam are not intersected
+_TANGENT_DEG = 8.0    # surfaces meeting at less than this along a seam are not intersected
 _EDGE_UV = 1e-6       # a branch this close (parameter units) to a domain edge is clamped to it, not crossing
 _MIN_AREA_RATIO = 0.8
 
@@ -195,7 +198,7 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
     score, br, t, xyz, where = best
     for a in (i, j):   # the stretch of each run that follows the branch (the surfaces may not reach further)
         d, k = where[a]
-        sub = _longest_run(np.r_[d <= near, False], close=3)
+        sub = _longest_run(np.r_[d <= near, np.zeros(4, bool)], close=3)   # not cyclic: the run is open
         if sub is None or len(sub.idx) < 6:
             return "no branch of their intersection follows the seam (the surfaces do not reach past the crease there)"
         keep = sub.idx
@@ -381,15 +384,20 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
         new, failed = {}, {}
         for k in sorted({f for pair in cands for f in pair}):
             mine = [c for pair, c in cands.items() if k in pair]
-            out = rebuild_loop(k, shapes[k], loops[k], mine, tol / _surface_speed(shapes[k].fit), reach)
+            tol_uv = tol / _surface_speed(shapes[k].fit)
+            out = rebuild_loop(k, shapes[k], loops[k], mine, tol_uv, reach)
             if isinstance(out, str):
-                failed[k] = out
+                # the pairs to drop: the one without which the loop can be rebuilt, if there is one
+                culprit = next((c for c in mine if len(mine) > 1 and not isinstance(
+                    rebuild_loop(k, shapes[k], loops[k], [d for d in mine if d is not c], tol_uv, reach), str)), None)
+                failed[k] = (out, [(culprit.i, culprit.j)] if culprit else [(c.i, c.j) for c in mine])
             else:
                 new[k] = FreeformShape(shapes[k].fit, shapes[k].loops, out, shapes[k].holes)
-        for k, reason in failed.items():
-            for pair in [p for p in cands if k in p]:
-                why[pair] = f"patch {k + 1}: {reason}"
-                del cands[pair]
+        for k, (reason, pairs) in failed.items():
+            for pair in pairs:
+                if pair in cands:
+                    why[pair] = f"patch {k + 1}: {reason}"
+                    del cands[pair]
         if failed:
             continue
         bad = False

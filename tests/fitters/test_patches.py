@@ -107,7 +107,7 @@ def test_box_patches_meet_the_tolerance_and_every_edge_has_a_measured_gap():
           f"shared edges (separate trims: {before.max():.2f} mm, {before.max() / spacing:.1f} spacings), {seconds:.1f} s")
 
 
-def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two():
+def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two(tmp_path):
     rng = np.random.default_rng(11)
     r, h = 25.0, 60.0
     p, part = capped_cylinder(rng, 10000, r, h, 0.05)
@@ -127,15 +127,19 @@ def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two():
             err = np.abs(np.abs(on[:, 2]) - h / 2)
         assert np.percentile(err, 95) < 0.2
     assert all(np.isfinite(g.max) and g.max > 0 for g in result.gaps)
-    # the rims are shared (cap plane and mantle cross there); the two halves of the wrap meet tangentially
-    # and keep their own trims, which the report says
-    assert [g.shared for g in result.gaps].count(True) >= 2
-    assert all(g.max <= 0.2 for g in result.gaps if g.shared)
-    assert any("tangentially" in g.why for g in result.gaps if not g.shared)
+    # the rims are shared (cap plane and mantle cross there), and so is the seam of the wrap's two halves:
+    # each reaches past its data, and as fitted their edges meet at 8.6 degrees, over the 8 under which
+    # surfaces count as tangent; all five are within the tolerance along the shared edge
+    assert [g.shared for g in result.gaps].count(True) == 5
+    assert all(g.max <= 0.2 for g in result.gaps)
     model = rgm.loads(text)
     assert not [d for d in model.diagnostics if d.is_error]
     assert all(isinstance(model.objects[f"patch_{k}"], TrimmedFace) for k in range(1, 5))
     assert text.count("G0 gap") == len(result.gaps)
+    if importlib.util.find_spec("OCP") is not None:   # OpenCASCADE's exact intersections agree
+        from rgm.backends.occ import write_step
+
+        write_step(model, tmp_path / "cylinder.step", tol=0.2)
 
 
 def test_an_open_wrap_is_one_patch_parameterised_by_its_angle():
@@ -198,12 +202,14 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     assert np.percentile(parts[0].ideal.distance(p[result.patches[0].indices]), 95) <= 1.0
     gaps = np.array([g.max for g in result.gaps])
     assert len(gaps) >= len(result) - 1 and np.all(np.isfinite(gaps))
-    # the cap and shoulder creases are shared where the surfaces cross: within the tolerance along the
-    # edge, several times closer than the separate trims were; every pair not shared says why
-    # (a crease along which one surface's domain ends is not shared: an exact intersector, OpenCASCADE's,
-    # finds the surfaces apart there, see shared_edges._candidate)
+    # the bottom, shoulder and cap creases are shared where the surfaces cross (each reaches past its data,
+    # so no domain edge clamps the intersection): within the tolerance along the edge, several times closer
+    # than the separate trims were; every pair not shared says why. Patches of a seam still over 1 mm are
+    # fitted again at 0.5 mm: 16 of the 21 seams are then within the tolerance (7 of 18 before either)
     shared = [g for g in result.gaps if g.shared]
-    assert len(shared) >= 2 and all(g.max <= 1.0 for g in shared)
+    assert len(shared) >= 6 and all(g.max <= 1.0 for g in shared)
+    within = sum(g.max <= 1.0 for g in result.gaps)
+    assert within >= 16 and gaps.max() < 1.6
     assert max(g.max for g in shared) < 0.5 * min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
     for g in shared:   # one binding, used by both faces' loops
@@ -214,6 +220,6 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     print(f"mustard: {len(p)} points, {len(result)} patches, ctrl {[s.fit.n_ctrl for s in result.shapes]}, "
           f"p95 {[round(s.fit.stats.p95, 2) for s in result.shapes]}, "
           f"max {[round(s.fit.stats.max, 2) for s in result.shapes]}; {len(shared)} of {len(gaps)} seams shared, "
-          f"G0 gap on them max {max(g.max for g in shared):.3f} mm (separate trims "
+          f"{within} within 1 mm; G0 gap on the shared ones max {max(g.max for g in shared):.3f} mm (separate trims "
           f"{[round(g.before, 2) for g in shared]} mm); the others max {max(g.max for g in apart):.2f} mm, "
           f"median {np.median([g.max for g in apart]):.2f} mm, {seconds:.1f} s")
