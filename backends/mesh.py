@@ -116,16 +116,24 @@ class _FaceMesher:
         self.tol, self.angle_tol = tol, angle_tol
         self.requests = set()
         self.qhull = Incremental()
+        self.frame = plane_frame(face.patch, tol)
+        self.interior = np.zeros((0, 2))
+        if self.frame is None:
+            self._start()
+        else:   # the grid only sets where the poles' samples fall
+            face.grid = (np.unique(np.concatenate([face.patch.domain[0], face.patch.breaks_u])),
+                         np.unique(np.concatenate([face.patch.domain[1], face.patch.breaks_v])))
+            self._boundary()
+
+    def _start(self):
+        """The initial grid (`_grid`) and the boundary on it: the grid points clear of the boundary, and
+        split requests for the boundary segments longer than LONGEST_SEGMENT grid cells."""
+        face = self.face
+        face.grid = _grid(face.patch, self.tol)
         self._boundary()
         gu, gv = face.grid
         uu, vv = np.meshgrid(gu[1:-1], gv[1:-1], indexing="ij")
         self.interior = self._clear_of_boundary(np.column_stack([uu.ravel(), vv.ravel()]))
-        self.frame = plane_frame(face.patch, tol)
-        if self.frame is None:
-            self._split_long()
-
-    def _split_long(self):
-        """Request splits of the boundary segments longer than LONGEST_SEGMENT grid cells."""
         p = self.scaled(self.b_uv)
         long = np.linalg.norm(p[self.segments[:, 1]] - p[self.segments[:, 0]], axis=1) > LONGEST_SEGMENT
         self.requests |= self._refs(np.flatnonzero(long))
@@ -219,7 +227,7 @@ class _FaceMesher:
             if self._flat():
                 return
             self.frame = None
-            self._split_long()
+            self._start()
         patch, nb = self.face.patch, None
         for _ in range(MAX_PASSES):
             if self.requests:   # split the boundary segments that failed and take up the new sampling
@@ -385,8 +393,6 @@ def tessellate_faces(faces, tol: float, angle_tol: float | None = None, eps: flo
         raise BackendError("nothing to tessellate: the model exports no surfaces or faces")
     size = _model_size(faces)
     eps = max(1e-9 * size, 1e-3 * tol) if eps is None else eps
-    for f in faces:
-        f.grid = _grid(f.patch, tol)
     edges = Edges(faces, tol, eps)
     ids, k = [], 0
     for f in faces:
@@ -430,10 +436,8 @@ def tessellate_faces(faces, tol: float, angle_tol: float | None = None, eps: flo
 
 
 def _orientation(tri, owner, nfaces, vertices) -> np.ndarray:
-    """Per-face flips making shared edges run opposite ways, then closed components face outwards."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
+    """Per-face flips making shared edges run opposite ways (a walk over the faces' adjacency, which
+    also labels its connected components), then closed components face outwards."""
     he = tri[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
     fo = np.repeat(owner, 3)
     key = np.sort(he, axis=1)
@@ -444,26 +448,26 @@ def _orientation(tri, owner, nfaces, vertices) -> np.ndarray:
     pair = first[(fo[first] != fo[first + 1])]
     same = he[pair, 0] == he[pair + 1, 0]             # same direction: one face must flip
     fa, fb = fo[pair], fo[pair + 1]
+    _, one = np.unique(np.minimum(fa, fb) * nfaces + np.maximum(fa, fb), return_index=True)   # per face pair
+    fa, fb, same = fa[one], fb[one], same[one]
     flip = np.zeros(nfaces, bool)
-    seen = np.zeros(nfaces, bool)
+    comp = -np.ones(nfaces, int)
     adj = {}
-    for a, b, s in zip(fa, fb, same):
+    for a, b, s in zip(fa.tolist(), fb.tolist(), same.tolist()):
         adj.setdefault(a, {})[b] = s
         adj.setdefault(b, {})[a] = s
     for start in range(nfaces):
-        if seen[start]:
+        if comp[start] >= 0:
             continue
-        seen[start] = True
+        comp[start] = start
         stack = [start]
         while stack:
             a = stack.pop()
             for b, s in adj.get(a, {}).items():
-                if not seen[b]:
-                    seen[b] = True
-                    flip[b] = flip[a] ^ bool(s)
+                if comp[b] < 0:
+                    comp[b] = start
+                    flip[b] = flip[a] ^ s
                     stack.append(b)
-    graph = coo_matrix((np.ones(len(fa)), (fa, fb)), shape=(nfaces, nfaces))
-    _, comp = connected_components(graph, directed=False)
     for c in np.unique(comp):
         members = np.flatnonzero(comp == c)
         t = tri[np.isin(owner, members)]

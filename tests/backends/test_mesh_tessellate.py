@@ -264,6 +264,23 @@ def test_planar_trimmed_face_is_its_boundary_polygon(seed, tol):
     assert abs(area(v, t) - area(fine.vertices, fine.triangles)) <= tol * perimeter
 
 
+def test_flat_surface_folded_over_itself_is_meshed_in_uv():
+    """A flat patch folding back over itself (x runs 0 -> 10 -> 0 mm along u): its trim circle's image
+    crosses itself in the plane, so the plane triangulation is refused and the face is meshed in (u, v)
+    (interior points), still within tol and covering the trim (area against a 10x finer mesh)."""
+    k = [0, 0, 0, 1, 1, 1]
+    x, y = np.meshgrid([0.0, 20.0, 0.0], [0.0, 5.0, 10.0], indexing="ij")
+    flat = NurbsSurface(2, 2, k, k, np.stack([x, y, np.zeros_like(x)], axis=-1))
+    face = TrimmedFace(BSplineSurface(flat), Loop((Circle([0.5, 0.5], [0, 0, 1], 0.3),)))
+    mesh = tessellate_mesh(face, 0.05)
+    assert len(mesh.triangles) > len(mesh.vertices) - 2
+    assert measured_deviation(mesh.vertices, mesh.triangles, flat) <= 0.05
+    fine = tessellate_mesh(face, 0.005)
+    ring = flat.evaluate(0.5 + 0.3 * np.cos(np.linspace(0, 2 * np.pi, 2001)), 0.5 + 0.3 * np.sin(np.linspace(0, 2 * np.pi, 2001)))
+    perimeter = np.linalg.norm(np.diff(ring, axis=0), axis=1).sum()
+    assert abs(area(mesh.vertices, mesh.triangles) - area(fine.vertices, fine.triangles)) <= 0.05 * perimeter
+
+
 def test_planarity_is_decided_by_the_control_net():
     """Coplanar control points (convex hull) make a face planar; a net 1 % of the tolerance out of its
     plane does not, and neither does a cone (a revolution's profile not perpendicular to its axis)."""
