@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rgm.errors import BackendError
+from rgm.geometry.power_form import power_form
 
 from .mesh_edges import Piece
 from .mesh_surface import Patch, surface_patch
@@ -30,6 +31,13 @@ class Face:
     tri_uv: np.ndarray | None = None               # (t, 3, 2) parameters of the triangle corners
 
 
+def _points_of(nurbs):
+    """t (m,) -> points (m, d) of a NurbsCurve, from its per-span power form (`rgm.geometry.power_form`:
+    edge sampling evaluates the trimming curves in many small calls) where it has one."""
+    power = power_form(nurbs)
+    return nurbs.evaluate if power is None else (lambda t: power.d(t, 0)[0])
+
+
 def _curve_piece(patch, nurbs, a=None, b=None):
     """Piece following a 2-D NurbsCurve from parameter a to b (default: its whole domain)."""
     t0, t1 = nurbs.domain
@@ -38,7 +46,8 @@ def _curve_piece(patch, nurbs, a=None, b=None):
     knots = np.unique(nurbs.knots)
     inner = (knots - a) / (b - a)
     breaks = np.unique(np.concatenate([[0.0, 1.0], inner[(inner > 0) & (inner < 1)]]))
-    return Piece(patch, lambda s: nurbs.evaluate(np.clip(a + s * (b - a), t0, t1)), breaks)
+    at = _points_of(nurbs)
+    return Piece(patch, lambda s: at(np.clip(a + s * (b - a), t0, t1)), breaks)
 
 
 def _line_piece(patch, p, q):
@@ -100,7 +109,9 @@ def _loop_pieces(loop, surface, patch, tol) -> list:
             out.append(_curve_piece(patch, piece.nurbs()))
         elif isinstance(surface, Plane):   # plane coordinates: an exact affine image of the curve
             c = piece.nurbs()
-            out.append(Piece(patch, lambda s, c=c, t=c.domain: surface.coordinates(c.evaluate(t[0] + s * (t[1] - t[0])))))
+            at, (t0, t1) = _points_of(c), c.domain
+            o, axes = surface.origin, np.column_stack([surface.x_dir, surface.y_dir])
+            out.append(Piece(patch, lambda s, at=at, t0=t0, t1=t1: (at(t0 + s * (t1 - t0)) - o) @ axes))
         else:
             out.append(piece.nurbs())
     _project_onto(out, patch, tol)
@@ -144,11 +155,13 @@ def _project_onto(pieces, patch, tol):
         return
     seams = _seams(patch, tol)
     probe = np.linspace(0.0, 1.0, 33)
+    curves = [k for k, c in enumerate(pieces) if isinstance(c, NurbsCurve)]
+    x = np.concatenate([pieces[k].evaluate(pieces[k].domain[0] + probe * np.ptp(pieces[k].domain)) for k in curves])
+    uv, dist = patch.closest(x, grid=32)   # one search for all the loop's curves, which lie on the surface
+    m = len(probe)
+    tables = {k: (uv[i * m:(i + 1) * m], dist[i * m:(i + 1) * m]) for i, k in enumerate(curves)}
     sides = {}
-    for k, c in enumerate(pieces):
-        if not isinstance(c, NurbsCurve):
-            continue
-        uv = patch.closest(c.evaluate(c.domain[0] + probe * (c.domain[1] - c.domain[0])))[0]
+    for k, (uv, _) in tables.items():
         for axis, lo, hi in seams:
             off = np.flatnonzero(np.minimum(np.abs(uv[:, axis] - lo), np.abs(uv[:, axis] - hi)) > 1e-7 * (hi - lo))
             side = lambda i: lo if uv[i, axis] < 0.5 * (lo + hi) else hi   # noqa: E731
@@ -161,21 +174,41 @@ def _project_onto(pieces, patch, tol):
                 sides[k, axis] = (value, value)
     for k, c in enumerate(pieces):
         if isinstance(c, NurbsCurve):
-            pieces[k] = Piece(patch, _seam_aware(patch, c, [(a, lo, hi, sides[k, a]) for a, lo, hi in seams]))
+            seam_sides = [(a, lo, hi, sides[k, a]) for a, lo, hi in seams]
+            uv, dist = tables[k]
+            pieces[k] = Piece(patch, _seam_aware(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist))
 
 
-def _seam_aware(patch, curve, seams):
-    """uv(s) of the closest points of `curve` (s in [0, 1] over its domain), seam points put on the side
-    chosen for the piece's start (s < 1/2) or end."""
+def _on_sides(uv, s, seams):
+    """uv (m, 2) at piece parameters s (m,) with the points on a seam put on the side chosen for the
+    piece's start (s < 1/2) or end."""
+    for axis, lo, hi, (start, end) in seams:
+        on = np.minimum(np.abs(uv[:, axis] - lo), np.abs(uv[:, axis] - hi)) <= 1e-7 * (hi - lo)
+        uv[on, axis] = np.where(s[on] < 0.5, start, end)
+    return uv
+
+
+def _seam_aware(patch, curve, seams, table_uv, table_dist):
+    """uv(s) of the closest points of `curve` (s in [0, 1] over its domain) on the seam sides chosen
+    (`_on_sides`). The closest points at equally spaced parameters (`table_uv`, at distances
+    `table_dist`: how far the curve lies off the surface) are interpolated as Gauss-Newton's guesses,
+    so the many small calls of edge sampling are local refinements; a point that ends farther from
+    the surface than twice the table's worst (plus 1e-9 of the table's extent) is searched globally."""
     t0, t1 = curve.domain
+    at = _points_of(curve)
+    probe = np.linspace(0.0, 1.0, len(table_uv))
+    extent = np.ptp(patch.evaluate(table_uv[:, 0], table_uv[:, 1]), axis=0).max()
+    limit = 2 * float(table_dist.max()) + 1e-9 * float(extent)
 
     def uv(s):
         s = np.asarray(s, float)
-        out = patch.closest(curve.evaluate(t0 + s * (t1 - t0)))[0]
-        for axis, lo, hi, (start, end) in seams:
-            on = np.minimum(np.abs(out[:, axis] - lo), np.abs(out[:, axis] - hi)) <= 1e-7 * (hi - lo)
-            out[on, axis] = np.where(s[on] < 0.5, start, end)
-        return out
+        x = at(t0 + s * (t1 - t0))
+        guess = np.column_stack([np.interp(s, probe, table_uv[:, 0]), np.interp(s, probe, table_uv[:, 1])])
+        out, dist = patch.project(x, guess, iterations=3)
+        far = dist > limit
+        if far.any():
+            out[far] = patch.closest(x[far])[0]
+        return _on_sides(out, s, seams)
 
     return uv
 

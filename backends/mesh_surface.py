@@ -120,14 +120,14 @@ class Patch:
         from scipy.spatial import cKDTree
 
         cache = self.__dict__.setdefault("_seeds_of", {})   # per domain: `restrict` starts a new one
-        if "grid" not in cache:
+        if grid not in cache:
             (u0, u1), (v0, v1) = self.domain
             gu = np.unique(np.concatenate([np.linspace(u0, u1, grid), self.breaks_u]))
             gv = np.unique(np.concatenate([np.linspace(v0, v1, grid), self.breaks_v]))
             uu, vv = np.meshgrid(gu, gv, indexing="ij")
             nodes = np.column_stack([uu.ravel(), vv.ravel()])
-            cache["grid"] = (cKDTree(self.evaluate(nodes[:, 0], nodes[:, 1])), nodes)
-        tree, nodes = cache["grid"]
+            cache[grid] = (cKDTree(self.evaluate(nodes[:, 0], nodes[:, 1])), nodes)
+        tree, nodes = cache[grid]
         return nodes[tree.query(x, k=starts)[1].reshape(len(x), starts)]
 
 

@@ -17,9 +17,9 @@ from rgm.geometry.basis import basis_derivatives_t
 
 __all__ = ["power_form"]
 
-#: highest degree converted to the per-span power form; higher degrees use the exact evaluators (the
-#: Taylor form itself measured as accurate as those up to degree 9, at a few 1e-15 of |S'|)
-_POWER_MAX_DEGREE = 7
+#: highest degree converted to the per-span power form (the Taylor form is as accurate as the exact
+#: evaluators up to it, tested); higher degrees use the exact evaluators
+_POWER_MAX_DEGREE = 8
 #: parameter pairs per block of the power-form evaluator (the gathered coefficients stay in cache)
 _POWER_CHUNK = 4096
 

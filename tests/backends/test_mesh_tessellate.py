@@ -57,14 +57,15 @@ def test_random_surface_within_tolerance(seed, tol):
 
 
 @settings(max_examples=25, deadline=None, database=None)
-@given(seed=st.integers(0, 10_000), degree=st.integers(1, 5))
+@given(seed=st.integers(0, 10_000), degree=st.integers(1, 8))
 @example(seed=124, degree=5)   # a span 5e-4 long: Su was off by 2e-9 when the power form was interpolated
 def test_power_form_evaluator_agrees_with_the_geometry_evaluator(seed, degree):
     """The patches evaluate B-splines from per-span power forms: points and first partials agree with
     rgm.geometry's evaluation (rational or not, at span ends and inside, on spans of any length) to
-    rounding. The bound, 1e-13 of the largest value, is 5x the worst difference over all seeds and
-    degrees here (1.8e-14 for the partials; 3e-14 for the points, |S| <= 10, against 1e-12), which
-    is the order of rgm.geometry's own error against exact rational arithmetic."""
+    rounding, up to the highest degree put in power form (8; degree 8 lofts come from OpenCASCADE).
+    The bound, 1e-13 of the largest value, is 3x the worst difference over every 7th seed x degrees
+    1..8 (3.5e-14 for the partials, at degree 8; 1.8e-14 up to degree 5; points 5e-14, |S| <= 10,
+    against 1e-12), the order of rgm.geometry's own error against exact rational arithmetic."""
     from rgm.backends.mesh_surface import RevolutionPatch
 
     nurbs = random_surface(seed, n=degree + 3, degree=degree)
