@@ -21,7 +21,11 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    `_TANGENT_DEG`, 8 degrees, as the two halves of a wrap can) are not intersected, nor pairs with no
    branch along the seam, a closed branch (which arc a loop keeps would be ambiguous), or a stretch of
    less than a few spacings: they keep their separate trims, and the reason is reported with the measured
-   gap. A crease at 8 degrees or more is intersected; an unstable intersection fails its measurement (4.).
+   gap. A crease at 8 degrees or more is intersected. The stretch must also lie on one branch of the
+   intersection approximated at a tenth of the tolerance: where two surfaces nearly touch, marching at the
+   tolerance may join what is a branch and a small closed loop, as an exact intersector (OpenCASCADE's)
+   and a finer marching find it, and the STEP file's edge would then miss the joins (the YCB potted meat
+   can).
 3. Loops (`rebuild_loop`): the loop's run is replaced by a `SharedEdge` piece and the rest of the loop,
    from the data as before, is re-fitted from join to join (`rgm.fitters.trimloops.fit_open_chain`: split
    at corners, ends fixed on the joins) after dropping the data samples the shared edge covers. Two shared
@@ -49,6 +53,7 @@ __all__ = ["SharedEdge", "share_boundaries", "rebuild_loop", "measure_shared"]
 
 _BRANCH = 4001        # samples of a branch for matching runs and joins
 _TANGENT_DEG = 8.0    # surfaces meeting at less than this along a seam are not intersected
+_FINER = 10           # a shared stretch is confirmed on the intersection approximated at tol / _FINER
 _EDGE_UV = 1e-6       # a branch this close (parameter units) to a domain edge is clamped to it, not crossing
 _MIN_AREA_RATIO = 0.8
 
@@ -227,6 +232,15 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
         if np.any((w <= np.array([u0, v0]) + _EDGE_UV) | (w >= np.array([u1, v1]) - _EDGE_UV)):
             return (f"their intersection runs along the edge of surface {a + 1}'s domain: the surfaces do not "
                     f"cross there, they only come within the tolerance")
+    try:   # the same stretch on one branch of a finer approximation: what an exact intersector finds
+        fine = intersect_surfaces(si, sj, tol / _FINER)
+    except GeometryError as exc:
+        return f"their intersection could not be approximated more finely ({exc})"
+    stretch = xyz[np.unique(np.linspace(lo, hi, 200).astype(int))]
+    if not any(np.all(cKDTree(br.curve.evaluate(np.linspace(*br.curve.domain, _BRANCH))).query(stretch)[0] <= tol)
+               for br in fine):
+        return ("their intersection's branches change when approximated at a tenth of the tolerance (the "
+                "surfaces nearly touch near the seam): an exact intersector would not find this edge")
     return _Candidate(i, j, xyz, uv, lo, hi, runs, rising, branches)
 
 
