@@ -266,7 +266,8 @@ class _Lowering:
     def _loop(self, loop: Loop, surface, sde: int) -> int:
         """142: CRTN, SPTR, BPTR (2-D curve or 102 of them), CPTR (3-D), PREF."""
         uv, xyz, kinds, near = [], [], [], None
-        for piece in loop.pieces:
+        # a composite piece's members are pieces of their own: each arc keeps its exact form (`_piece`)
+        for piece in (m for p in loop.pieces for m in (_flatten(p) if isinstance(p, CompositeCurve) else [p])):
             b, c, crtn = self._loop_piece(piece, surface, near)
             near = np.asarray(b.end, float)
             uv.append(self._piece(b, 2))

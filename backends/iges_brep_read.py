@@ -12,6 +12,8 @@ Face and shell orientation flags are not kept: rgm's shells carry no orientation
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from rgm.errors import GeometryError
@@ -19,7 +21,7 @@ from rgm.model import (
     BSplineCurve, Circle, CircularArc, CompositeCurve, Line, Loop, Plane, Polyline, Revolution, Shell, TrimmedFace,
 )
 
-__all__ = ["BrepReading", "BREP_TYPES", "reversed_curve"]
+__all__ = ["BrepReading", "BREP_TYPES", "circles_started_at_vertices", "reversed_curve", "started_at_joins"]
 
 #: entity types of the manifold solid B-rep (and 190, the plane surface OpenCASCADE's faces use)
 BREP_TYPES = {186, 190, 502, 504, 508, 510, 514}
@@ -38,6 +40,64 @@ def reversed_curve(curve):
     if isinstance(curve, CompositeCurve):
         return CompositeCurve(tuple(reversed_curve(p) for p in reversed(curve.pieces)))
     return BSplineCurve(curve.nurbs().reverse())
+
+
+def started_at_joins(pieces) -> tuple:
+    """A loop's pieces with every full `Circle` among several pieces made a full-turn `CircularArc` from
+    the previous piece's end: a circle has no start point of its own (rgm's starts on a reference
+    direction of its normal), but in a loop it must start at the vertex where its neighbours join it
+    (a hole's seam line and rims, say), or the loop would not close."""
+    pieces = list(pieces)
+    if len(pieces) < 2:
+        return tuple(pieces)
+    for k, c in enumerate(pieces):
+        if isinstance(c, Circle):
+            prev = pieces[k - 1].nurbs()
+            pieces[k] = _from(c, prev.evaluate(np.array([prev.domain[1]]))[0])
+    return tuple(pieces)
+
+
+def circles_started_at_vertices(faces, tol: float) -> tuple:
+    """Faces whose single-circle loops (a hole's rim) start at a loop vertex of the faces lying on the
+    circle (within `tol`), such as the end of the hole's seam line on the neighbouring face, so both
+    faces describe their common edge from the same point (the mesher then samples it once)."""
+    ends = [p.nurbs().evaluate(np.array(p.nurbs().domain)) for f in faces if isinstance(f, TrimmedFace)
+            for lp in f.loops() for p in lp.pieces if len(lp.pieces) > 1 and p.dim == 3]
+    if not ends:
+        return tuple(faces)
+    ends = np.concatenate(ends)
+
+    def started(loop):
+        c = loop.pieces[0] if len(loop.pieces) == 1 else None
+        if not isinstance(c, Circle) or c.dim != 3:
+            return loop
+        d = ends - c.center
+        axial = d @ c.normal
+        off = np.hypot(np.linalg.norm(d - axial[:, None] * c.normal, axis=1) - c.radius, axial)
+        return replace(loop, pieces=(_from(c, ends[np.argmin(off)]),)) if off.min() <= tol else loop
+
+    return tuple(replace(f, outer=f.outer and started(f.outer), holes=tuple(started(h) for h in f.holes))
+                 if isinstance(f, TrimmedFace) else f for f in faces)
+
+
+def _from(circle, point):
+    """The full turn of `circle` from the point of it nearest to `point` (a `CircularArc` with start =
+    end), or the circle itself where it starts there already."""
+    n = np.asarray(circle.normal, float)
+    radial = _lift(point) - _lift(circle.center)
+    radial -= (radial @ n) * n
+    if not np.linalg.norm(radial) > 0:
+        return circle
+    start = (_lift(circle.center) + circle.radius * radial / np.linalg.norm(radial))[:circle.dim]
+    own = circle.nurbs().evaluate(np.array([circle.nurbs().domain[0]]))[0]
+    if np.linalg.norm(own - start) <= 1e-12 * circle.radius:
+        return circle
+    return CircularArc(circle.center, circle.normal, circle.radius, start, start)
+
+
+def _lift(p) -> np.ndarray:
+    p = np.asarray(p, float)
+    return p if p.shape[0] == 3 else np.concatenate([p, [0.0]])
 
 
 class BrepReading:
@@ -96,7 +156,8 @@ class BrepReading:
     def _e510(self, de, dim):
         d = self.d
         surface = self.get(d.int(de, 1))
-        loops = [Loop(tuple(self._brep_loop(lp, surface)), name=self.name(lp)) for lp in d.ints(de, 4, d.int(de, 2))]
+        loops = [Loop(started_at_joins(self._brep_loop(lp, surface)), name=self.name(lp))
+                 for lp in d.ints(de, 4, d.int(de, 2))]
         outer = d.int(de, 3) == 1
         return TrimmedFace(surface, loops[0] if outer else None, tuple(loops[1:] if outer else loops))
 
@@ -121,8 +182,17 @@ class BrepReading:
             if self.d.entries[lst].type != 504:
                 raise GeometryError(f"an edge use points to DE {lst}, which is not a 504 edge list")
             curve = self.get(self.d.int(lst, 2 + 5 * (index - 1)))
+            if isinstance(curve, Circle):   # a full circle starts at its edge's start vertex
+                start = self._vertex(*self.d.ints(lst, 3 + 5 * (index - 1), 2))
+                curve = _from(curve, start)
             pieces.append(curve if sense == 1 else reversed_curve(curve))
         return pieces
+
+    def _vertex(self, vlist: int, index: int) -> np.ndarray:
+        """Point `index` (1-based) of the 502 vertex list at DE `vlist`."""
+        if self.d.entries[vlist].type != 502:
+            raise GeometryError(f"an edge's vertex (DE {vlist}) must be in a 502 vertex list")
+        return self.d.reals(vlist, 2 + 3 * (index - 1), 3)
 
 
 def _as_revolution(faces):

@@ -26,7 +26,7 @@ from rgm.model import (
     Polyline, Revolution, Shell, TrimmedFace,
 )
 
-from .iges_brep_read import BREP_TYPES, BrepReading
+from .iges_brep_read import BREP_TYPES, BrepReading, circles_started_at_vertices, started_at_joins
 from .iges_format import IgesFormatError
 from .iges_parse import IgesData, parse_iges
 from .iges_shapes import as_arc, as_plane, sub_curve, sub_surface
@@ -216,7 +216,7 @@ class _Reader(BrepReading):
         s = np.array([sx, sy, zt])[:dim]
         e = np.array([ex, ey, zt])[:dim]
         radius = float(np.linalg.norm(s - c))
-        if np.array_equal(s, e):
+        if np.array_equal(s, e):   # a full circle: in a loop, it starts where its neighbours join it
             return Circle(c, [0.0, 0.0, 1.0], radius)
         return CircularArc(c, [0.0, 0.0, 1.0], radius, s, e)
 
@@ -373,8 +373,8 @@ class _Reader(BrepReading):
         d = self.d
         pts, n1, n2, pto = d.ints(de, 1, 4)
         surface = self.get(pts)
-        outer = Loop(tuple(self.loop_pieces(pto, surface)), name=self.name(pto)) if n1 and pto > 0 else None
-        holes = tuple(Loop(tuple(self.loop_pieces(h, surface)), name=self.name(h)) for h in d.ints(de, 5, n2))
+        outer = Loop(started_at_joins(self.loop_pieces(pto, surface)), name=self.name(pto)) if n1 and pto > 0 else None
+        holes = tuple(Loop(started_at_joins(self.loop_pieces(h, surface)), name=self.name(h)) for h in d.ints(de, 5, n2))
         return TrimmedFace(surface, outer, holes)
 
     def _e402(self, de, dim):
@@ -382,7 +382,7 @@ class _Reader(BrepReading):
         if e.form not in (1, 7):
             self.unsupported[de] = (402, e.form, de)
             raise _Skip
-        return Shell(tuple(self.get(m) for m in self.d.ints(de, 2, self.d.int(de, 1))))
+        return Shell(circles_started_at_vertices([self.get(m) for m in self.d.ints(de, 2, self.d.int(de, 1))], self.tol))
 
 
 def read_iges(text: str, source: str | None = None) -> IgesImport:

@@ -103,11 +103,15 @@ class _Writer:
             return f"{'uvline' if obj.dim == 2 else 'line'}({_point(obj.p0)}, {_point(obj.p1)})"
         if isinstance(obj, Polyline):
             return f"polyline([{', '.join(_point(p) for p in obj.points)}])"
-        if isinstance(obj, CircularArc):
+        if isinstance(obj, CircularArc):   # the language's arc is the one through three points
             x, y = obj.frame
-            half = 0.5 * obj.sweep
-            mid = np.concatenate([obj.center, [0.0]])[:3] + obj.radius * (np.cos(half) * x + np.sin(half) * y)
-            return f"arc({_point(obj.start_point)}, {_point(mid[:obj.dim])}, {_point(obj.end_point)})"
+            at = lambda a: _point((np.concatenate([obj.center, [0.0]])[:3] + obj.radius * (  # noqa: E731
+                np.cos(a) * x + np.sin(a) * y))[:obj.dim])
+            if obj.sweep < 2 * np.pi:
+                return f"arc({_point(obj.start_point)}, {at(0.5 * obj.sweep)}, {_point(obj.end_point)})"
+            # a full turn from its start point (a loop piece where a circle would start elsewhere): two halves
+            return f"profile(arc({_point(obj.start_point)}, {at(0.5 * np.pi)}, {at(np.pi)}), " \
+                   f"arc({at(np.pi)}, {at(1.5 * np.pi)}, {_point(obj.start_point)}))"
         if isinstance(obj, Circle):
             if obj.dim == 2:  # the language's circle is 3-D: a parameter-space circle is its exact NURBS
                 return self._bspline(obj.nurbs())
