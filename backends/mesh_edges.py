@@ -57,12 +57,50 @@ def _cut(a, b, k) -> np.ndarray:
     return ((b - a)[which] / k[which]) * j + a[which]   # as np.linspace computes them
 
 
+#: an inner break of a piece where its tangent turns by more than this (radians) keeps a sample (a corner)
+_CORNER = np.radians(1.0)
+
+
+def _corners(pts) -> np.ndarray:
+    """(spans - 1,) whether the tangent turns at each inner break, from probes pts (spans, k, 3) (one-sided
+    second-order differences: on a smooth curve they agree to the square of the probe step)."""
+    t_end = 3 * pts[:-1, -1] - 4 * pts[:-1, -2] + pts[:-1, -3]
+    t_start = -3 * pts[1:, 0] + 4 * pts[1:, 1] - pts[1:, 2]
+    n = np.linalg.norm(t_end, axis=1) * np.linalg.norm(t_start, axis=1)
+    return np.einsum("ij,ij->i", t_end, t_start) < np.cos(_CORNER) * n
+
+
+def _equidistributed(b, w, corner) -> np.ndarray:
+    """Inner samples of a piece with breaks b (m + 1,) given w (m, k), the chords each of k equal probe
+    steps per span needs (sqrt of its sagitta over the limit: the sagitta scales as the square of the
+    step), and the inner breaks that are corners (m - 1,). Between corners (where a sample stays) the
+    piece gets ceil(sum w) chords at equal shares of the cumulative need (linear within a probe step):
+    shorter where the curve bends more or runs faster in its parameter, and smooth knots are crossed
+    rather than rounded up to on each side."""
+    k = w.shape[1]
+    s = np.append((b[:-1, None] + np.diff(b)[:, None] * (np.arange(k) / k)[None, :]).ravel(), b[-1])
+    need = w.ravel()
+    at = np.flatnonzero(corner) + 1
+    cuts = np.concatenate([[0], at * k, [len(need)]])
+    out = [b[at]]
+    for lo, hi in zip(cuts[:-1], cuts[1:]):
+        run = need[lo:hi]
+        total = run.sum()
+        n = max(1, int(np.ceil(total - 1e-9)))
+        if n > 1:
+            run = np.maximum(run, 1e-6 * total)                          # strictly increasing shares
+            share = np.concatenate([[0.0], np.cumsum(run)]) / run.sum()
+            out.append(np.interp(np.arange(1, n) / n, share, s[lo:hi + 1]))
+    return np.concatenate(out)
+
+
 def _sample_pieces(pieces, tol) -> list:
     """Parameters s (k,) in [0, 1] per piece such that every chord of the piece's 3-D image is within
-    `tol` of it (point-to-segment distance at 3 inner points per chord). Each knot span starts with
-    equal steps sized from its largest sagitta over 16 probe steps (the sagitta scales as the square of
-    the step); a chord still failing by d is cut into ceil(sqrt(d / tol)) equal parts. All pieces are
-    sampled together: one `xyz_of` per round."""
+    `tol` of it (point-to-segment distance at 3 inner points per chord). A piece starts with the chords
+    its sagittas over 16 probe steps per span call for, equidistributed between its corners
+    (`_equidistributed`); a chord
+    still failing by d is cut into ceil(sqrt(d / tol)) equal parts. All pieces are sampled together:
+    one `xyz_of` per round."""
     limit = CERTIFY * tol
     fine = np.linspace(0, 1, 33)
     spans = [p.breaks for p in pieces]
@@ -70,9 +108,8 @@ def _sample_pieces(pieces, tol) -> list:
     out = []
     for b, pts in zip(spans, probes):
         pts = pts.reshape(len(b) - 1, 33, 3)
-        d = segment_distance(pts[:, 1::2], pts[:, 0:-1:2], pts[:, 2::2]).max(axis=1)
-        n = np.maximum(1, np.ceil(16 * np.sqrt(d / limit))).astype(int)
-        out.append(np.unique(np.concatenate([b, _cut(b[:-1], b[1:], n)])))
+        w = np.sqrt(segment_distance(pts[:, 1::2], pts[:, 0:-1:2], pts[:, 2::2]) / limit)   # (spans, 16)
+        out.append(np.unique(np.concatenate([b[[0, -1]], _equidistributed(b, w, _corners(pts))])))
     fr = np.array([0.25, 0.5, 0.75])
     active = list(range(len(pieces)))
     for _ in range(40):

@@ -38,16 +38,20 @@ def _points_of(nurbs):
     return nurbs.evaluate if power is None else (lambda t: power.d(t, 0)[0])
 
 
+def _knot_breaks(nurbs, a, b) -> np.ndarray:
+    """The knots of a NurbsCurve inside (a, b) as piece parameters in [0, 1], with the ends: the
+    pieces between them are smooth, so edge sampling sizes its steps on each separately."""
+    inner = (np.unique(nurbs.knots) - a) / (b - a)
+    return np.unique(np.concatenate([[0.0, 1.0], inner[(inner > 0) & (inner < 1)]]))
+
+
 def _curve_piece(patch, nurbs, a=None, b=None):
     """Piece following a 2-D NurbsCurve from parameter a to b (default: its whole domain)."""
     t0, t1 = nurbs.domain
     a = t0 if a is None else a
     b = t1 if b is None else b
-    knots = np.unique(nurbs.knots)
-    inner = (knots - a) / (b - a)
-    breaks = np.unique(np.concatenate([[0.0, 1.0], inner[(inner > 0) & (inner < 1)]]))
     at = _points_of(nurbs)
-    return Piece(patch, lambda s: at(np.clip(a + s * (b - a), t0, t1)), breaks)
+    return Piece(patch, lambda s: at(np.clip(a + s * (b - a), t0, t1)), _knot_breaks(nurbs, a, b))
 
 
 def _line_piece(patch, p, q):
@@ -111,7 +115,8 @@ def _loop_pieces(loop, surface, patch, tol) -> list:
             c = piece.nurbs()
             at, (t0, t1) = _points_of(c), c.domain
             o, axes = surface.origin, np.column_stack([surface.x_dir, surface.y_dir])
-            out.append(Piece(patch, lambda s, at=at, t0=t0, t1=t1: (at(t0 + s * (t1 - t0)) - o) @ axes))
+            out.append(Piece(patch, lambda s, at=at, t0=t0, t1=t1: (at(t0 + s * (t1 - t0)) - o) @ axes,
+                             _knot_breaks(c, t0, t1)))
         else:
             out.append(piece.nurbs())
     _project_onto(out, patch, tol)
@@ -176,7 +181,8 @@ def _project_onto(pieces, patch, tol):
         if isinstance(c, NurbsCurve):
             seam_sides = [(a, lo, hi, sides[k, a]) for a, lo, hi in seams]
             uv, dist = tables[k]
-            pieces[k] = Piece(patch, _seam_aware(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist))
+            pieces[k] = Piece(patch, _seam_aware(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist),
+                              _knot_breaks(c, *c.domain))
 
 
 def _on_sides(uv, s, seams):
@@ -254,8 +260,8 @@ def _trimmed_face(face, tol):
     if face.outer is None:
         if isinstance(surface, Plane):
             raise BackendError("an infinite plane needs an outer loop to be meshed")
-        patch = surface_patch(surface, trimmed=False)
-        return Face(patch, _rectangle(patch) + [], True)
+        patch = surface_patch(surface, trimmed=bool(face.holes))   # holes live in rgm's (u, v)
+        return Face(patch, _rectangle(patch) + [_loop_pieces(h, surface, patch, tol) for h in face.holes], True)
     box = None
     if isinstance(surface, Plane):  # the patch box: the loops' plane coordinates
         probe = PlanePatchBox(surface)

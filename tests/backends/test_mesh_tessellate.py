@@ -265,6 +265,27 @@ def test_planar_trimmed_face_is_its_boundary_polygon(seed, tol):
     assert abs(area(v, t) - area(fine.vertices, fine.triangles)) <= tol * perimeter
 
 
+def test_holes_of_a_face_without_outer_loop_are_kept():
+    """A trimmed face with holes and no outer loop is the whole surface less the holes (its holes were
+    dropped before): no triangle inside the hole, and the same area as with the domain as outer loop."""
+    nurbs = random_surface(11)
+    hole = (Loop((Circle([0.3, 0.5], [0, 0, -1], 0.12),)),)
+    mesh = tessellate_mesh(TrimmedFace(BSplineSurface(nurbs), None, hole), 0.05)
+    v, t = mesh.vertices, mesh.triangles
+    inside = np.linalg.norm(np.concatenate([f.tri_uv.mean(axis=1) for f in mesh.faces]) - [0.3, 0.5], axis=1)
+    assert inside.min() >= 0.12 - 0.02
+    square = Loop((Polyline([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]),))
+    v2, t2 = tessellate(TrimmedFace(BSplineSurface(nurbs), square, hole), 0.05)
+    ring = nurbs.evaluate(0.3 + 0.12 * np.cos(np.linspace(0, 2 * np.pi, 2001)), 0.5 + 0.12 * np.sin(np.linspace(0, 2 * np.pi, 2001)))
+    assert abs(area(v, t) - area(v2, t2)) <= 0.05 * np.linalg.norm(np.diff(ring, axis=0), axis=1).sum()
+    # and the hole's own area is what is missing: |Su x Sv| integrated over the disk (midpoint rule, polar)
+    r, a = np.meshgrid((np.arange(200) + 0.5) / 200 * 0.12, (np.arange(400) + 0.5) / 400 * 2 * np.pi, indexing="ij")
+    _, su, sv = NurbsPatch(nurbs).d1((0.3 + r * np.cos(a)).ravel(), (0.5 + r * np.sin(a)).ravel())
+    hole_area = (np.linalg.norm(np.cross(su, sv), axis=1) * r.ravel()).sum() * (0.12 / 200) * (2 * np.pi / 400)
+    missing = area(*tessellate(BSplineSurface(nurbs), 0.05)) - area(v, t)   # 1.85 mm^2 of 2.00
+    assert abs(missing - hole_area) <= 0.05 * np.linalg.norm(np.diff(ring, axis=0), axis=1).sum()
+
+
 def test_flat_surface_folded_over_itself_is_meshed_in_uv():
     """A flat patch folding back over itself (x runs 0 -> 10 -> 0 mm along u): its trim circle's image
     crosses itself in the plane, so the plane triangulation is refused and the face is meshed in (u, v)
