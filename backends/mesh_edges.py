@@ -22,11 +22,14 @@ CERTIFY = 0.98
 
 @dataclass
 class Piece:
-    """One boundary piece of a face: uv(s) for s in [0, 1] on `patch`, with derivative breaks."""
+    """One boundary piece of a face: uv(s) for s in [0, 1] on `patch`, with derivative breaks.
+    `domain_side`: a side of the patch's parameter rectangle, sampled in equal steps per knot span as
+    the face's initial grid lines are (`rgm.backends.mesh._grid`), so the grid meets it at its samples."""
 
     patch: Patch
     uv: object
     breaks: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0]))
+    domain_side: bool = False
 
     def xyz(self, s) -> np.ndarray:
         uv = self.uv(np.clip(np.asarray(s, float), 0.0, 1.0))
@@ -94,22 +97,26 @@ def _equidistributed(b, w, corner) -> np.ndarray:
     return np.concatenate(out)
 
 
-def _sample_pieces(pieces, tol) -> list:
+def _sample_pieces(pieces, tol, sides) -> list:
     """Parameters s (k,) in [0, 1] per piece such that every chord of the piece's 3-D image is within
     `tol` of it (point-to-segment distance at 3 inner points per chord). A piece starts with the chords
     its sagittas over 16 probe steps per span call for, equidistributed between its corners
-    (`_equidistributed`); a chord
-    still failing by d is cut into ceil(sqrt(d / tol)) equal parts. All pieces are sampled together:
-    one `xyz_of` per round."""
+    (`_equidistributed`), or, where `sides` says it runs along a face's domain side, in equal steps per
+    span; a chord still failing by d is cut into ceil(sqrt(d / tol)) equal parts. All pieces are
+    sampled together: one `xyz_of` per round."""
     limit = CERTIFY * tol
     fine = np.linspace(0, 1, 33)
     spans = [p.breaks for p in pieces]
     probes = xyz_of(pieces, [(b[:-1, None] + np.diff(b)[:, None] * fine[None, :]).ravel() for b in spans])
     out = []
-    for b, pts in zip(spans, probes):
+    for b, pts, side in zip(spans, probes, sides):
         pts = pts.reshape(len(b) - 1, 33, 3)
         w = np.sqrt(segment_distance(pts[:, 1::2], pts[:, 0:-1:2], pts[:, 2::2]) / limit)   # (spans, 16)
-        out.append(np.unique(np.concatenate([b[[0, -1]], _equidistributed(b, w, _corners(pts))])))
+        if side:   # equal steps per span, sized by its neediest probe step (as the grid lines are)
+            inner = np.concatenate([b[1:-1], _cut(b[:-1], b[1:], np.maximum(1, np.ceil(16 * w.max(axis=1))))])
+        else:
+            inner = _equidistributed(b, w, _corners(pts))
+        out.append(np.unique(np.concatenate([b[[0, -1]], inner])))
     fr = np.array([0.25, 0.5, 0.75])
     active = list(range(len(pieces)))
     for _ in range(40):
@@ -214,7 +221,8 @@ class Edges:
                     self.same_dir[j] = same
         self.reps = reps
         self.version = np.zeros(len(reps), int)
-        self.rep_s = _sample_pieces([self.pieces[r] for r in reps], tol)
+        sides = [any(self.pieces[j].domain_side for j in np.flatnonzero(self.group == g)) for g in range(len(reps))]
+        self.rep_s = _sample_pieces([self.pieces[r] for r in reps], tol, sides)
         self.rep_ids = [None] * len(reps)
         self.member_s = {}
         self._assign_ids()

@@ -226,7 +226,10 @@ def _rectangle(patch) -> list:
     su = (patch.breaks_u - u0) / (u1 - u0)
     sv = (patch.breaks_v - v0) / (v1 - v0)
     breaks = (su, sv, 1 - su, 1 - sv)
-    return [[_with_breaks(_line_piece(patch, c[k], c[(k + 1) % 4]), breaks[k]) for k in range(4)]]
+    sides = [_with_breaks(_line_piece(patch, c[k], c[(k + 1) % 4]), breaks[k]) for k in range(4)]
+    for piece in sides:
+        piece.domain_side = True
+    return [sides]
 
 
 def _with_breaks(piece, s):
