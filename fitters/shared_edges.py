@@ -21,11 +21,11 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    `_TANGENT_DEG`, 8 degrees, as the two halves of a wrap can) are not intersected, nor pairs with no
    branch along the seam, a closed branch (which arc a loop keeps would be ambiguous), or a stretch of
    less than a few spacings: they keep their separate trims, and the reason is reported with the measured
-   gap. A crease at 8 degrees or more is intersected. The stretch must also lie on one branch of the
-   intersection approximated at a tenth of the tolerance: where two surfaces nearly touch, marching at the
+   gap. A crease at 8 degrees or more is intersected. Where two surfaces nearly touch, marching at the
    tolerance may join what is a branch and a small closed loop, as an exact intersector (OpenCASCADE's)
    and a finer marching find it, and the STEP file's edge would then miss the joins (the YCB potted meat
-   can).
+   can): a stretch along which the surfaces cross at less than twice that angle somewhere must also lie
+   on one branch of the intersection approximated at a tenth of the tolerance.
 3. Loops (`rebuild_loop`): the loop's run is replaced by a `SharedEdge` piece and the rest of the loop,
    from the data as before, is re-fitted from join to join (`rgm.fitters.trimloops.fit_open_chain`: split
    at corners, ends fixed on the joins) after dropping the data samples the shared edge covers. Two shared
@@ -232,12 +232,15 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
         if np.any((w <= np.array([u0, v0]) + _EDGE_UV) | (w >= np.array([u1, v1]) - _EDGE_UV)):
             return (f"their intersection runs along the edge of surface {a + 1}'s domain: the surfaces do not "
                     f"cross there, they only come within the tolerance")
+    k = np.unique(np.linspace(lo, hi, 200).astype(int))
+    cos = np.abs(np.einsum("ij,ij->i", si.normal(*uv[i][k].T), sj.normal(*uv[j][k].T)))
+    if np.degrees(np.arccos(min(cos.max(), 1.0))) >= 2 * _TANGENT_DEG:
+        return _Candidate(i, j, xyz, uv, lo, hi, runs, rising, branches)   # crossing steeply all along
     try:   # the same stretch on one branch of a finer approximation: what an exact intersector finds
         fine = intersect_surfaces(si, sj, tol / _FINER)
     except GeometryError as exc:
         return f"their intersection could not be approximated more finely ({exc})"
-    stretch = xyz[np.unique(np.linspace(lo, hi, 200).astype(int))]
-    if not any(np.all(cKDTree(br.curve.evaluate(np.linspace(*br.curve.domain, _BRANCH))).query(stretch)[0] <= tol)
+    if not any(np.all(cKDTree(br.curve.evaluate(np.linspace(*br.curve.domain, _BRANCH))).query(xyz[k])[0] <= tol)
                for br in fine):
         return ("their intersection's branches change when approximated at a tenth of the tolerance (the "
                 "surfaces nearly touch near the seam): an exact intersector would not find this edge")
