@@ -18,6 +18,7 @@ Pipeline:
    trimming loops are edges and no triangle lies outside them. Refinement is greedy: every failing
    triangle gets a point where its measured deviation is largest (or the midpoint of its longest edge
    when only the normal fails); a failure on a boundary edge splits that edge for every face sharing it.
+   A planar face is triangulated in its plane from its boundary samples alone (`rgm.backends.mesh_planar`).
 4. Per-face orientation is made consistent across shared edges; closed components face outwards.
 """
 from __future__ import annotations
