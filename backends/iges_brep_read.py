@@ -20,6 +20,7 @@ from rgm.errors import GeometryError
 from rgm.model import (
     BSplineCurve, Circle, CircularArc, CompositeCurve, Line, Loop, Plane, Polyline, Revolution, Shell, TrimmedFace,
 )
+from rgm.model.curves import _lift
 
 __all__ = ["BrepReading", "BREP_TYPES", "circles_started_at_vertices", "reversed_curve", "started_at_joins"]
 
@@ -84,7 +85,7 @@ def _from(circle, point):
     """The full turn of `circle` from the point of it nearest to `point` (a `CircularArc` with start =
     end), or the circle itself where it starts there already."""
     n = np.asarray(circle.normal, float)
-    radial = _lift(point) - _lift(circle.center)
+    radial = _lift(np.asarray(point, float)) - _lift(circle.center)
     radial -= (radial @ n) * n
     if not np.linalg.norm(radial) > 0:
         return circle
@@ -93,11 +94,6 @@ def _from(circle, point):
     if np.linalg.norm(own - start) <= 1e-12 * circle.radius:
         return circle
     return CircularArc(circle.center, circle.normal, circle.radius, start, start)
-
-
-def _lift(p) -> np.ndarray:
-    p = np.asarray(p, float)
-    return p if p.shape[0] == 3 else np.concatenate([p, [0.0]])
 
 
 class BrepReading:

@@ -221,7 +221,9 @@ class Edges:
                     self.same_dir[j] = same
         self.reps = reps
         self.version = np.zeros(len(reps), int)
-        sides = [any(self.pieces[j].domain_side for j in np.flatnonzero(self.group == g)) for g in range(len(reps))]
+        sides = np.zeros(len(reps), bool)            # groups with a member along a face's domain side
+        member = self.group >= 0
+        np.logical_or.at(sides, self.group[member], np.array([p.domain_side for p in self.pieces])[member])
         self.rep_s = _sample_pieces([self.pieces[r] for r in reps], tol, sides)
         self.rep_ids = [None] * len(reps)
         self.member_s = {}

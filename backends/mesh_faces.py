@@ -114,8 +114,7 @@ def _loop_pieces(loop, surface, patch, tol) -> list:
         elif isinstance(surface, Plane):   # plane coordinates: an exact affine image of the curve
             c = piece.nurbs()
             at, (t0, t1) = _points_of(c), c.domain
-            o, axes = surface.origin, np.column_stack([surface.x_dir, surface.y_dir])
-            out.append(Piece(patch, lambda s, at=at, t0=t0, t1=t1: (at(t0 + s * (t1 - t0)) - o) @ axes,
+            out.append(Piece(patch, lambda s, at=at, t0=t0, t1=t1: surface.coordinates(at(t0 + s * (t1 - t0))),
                              _knot_breaks(c, t0, t1)))
         else:
             out.append(piece.nurbs())
