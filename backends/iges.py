@@ -399,12 +399,14 @@ def iges_file(model, *, file_name: str = "model.igs", nurbs_only: bool = False, 
 
 
 def write_iges(model, path, *, verify: bool = False, nurbs_only: bool = False, trim_entity: str = "144",
-               pcurve_preference: str = "auto", tol: float | None = None, color=None, **ignored) -> Path:
+               pcurve_preference: str = "auto", tol: float | None = None, color=None, report=None,
+               **ignored) -> Path:
     """Write `model` as IGES 5.3 to `path` atomically.
 
     With `verify`, the file is first written beside `path` under a temporary name, read back by
     OpenCASCADE and by rgm's reader, and compared with the model (`iges_verify.verify_iges`); it is
-    renamed into place only if both deviations are within `tol` (default: the model tolerance).
+    renamed into place only if both deviations are within `tol` (default: the model tolerance), and
+    the figures are given to `report` (a callable taking one line of text) when there is one.
     """
     from rgm.atomic import temp_path_beside, write_atomic
 
@@ -418,7 +420,10 @@ def write_iges(model, path, *, verify: bool = False, nurbs_only: bool = False, t
     tmp = temp_path_beside(path)
     try:
         write_atomic(tmp, data)
-        verify_iges(model, tmp, tol=tol)
+        dev = verify_iges(model, tmp, tol=tol)
+        if report is not None:
+            report(f"verified {path}: read back by rgm and by OpenCASCADE, max deviation from the model "
+                   f"{dev['rgm']:.3g} and {dev['occ']:.3g} {model.units} (tolerance {dev['tol']:g})")
         os.replace(tmp, path)
     finally:
         if tmp.exists():

@@ -97,4 +97,4 @@ def verify_iges(model, path, *, tol: float | None = None) -> dict:
     if not occ_dev <= tol:
         raise BackendError(f"{path}: read back by OpenCASCADE, the file deviates {occ_dev:.3g} from the "
                            f"model (tolerance {tol:g})")
-    return {"rgm": rgm_dev, "occ": occ_dev}
+    return {"rgm": rgm_dev, "occ": occ_dev, "tol": tol}

@@ -543,16 +543,33 @@ def face_samples(objs, samples: int = 60, curve_tol=None):
     return np.concatenate(pts), size
 
 
-def write_mesh(model, path, *, fmt: str, tol: float | None = None, angle_tol: float | None = None, **ignored):
+def open_edges(triangles) -> int:
+    """Edges of a triangle mesh not used by exactly two triangles (0: watertight)."""
+    e = np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, count = np.unique(e, axis=0, return_counts=True)
+    return int((count != 2).sum())
+
+
+def write_mesh(model, path, *, fmt: str, tol: float | None = None, angle_tol: float | None = None, report=None,
+               **ignored):
     """Tessellate `model` and write it through trimesh as binary STL, OBJ, PLY or GLB, atomically.
-    `tol` (model units) defaults to the model's `tolerance`."""
+    `tol` (model units) defaults to the model's `tolerance`. `report` (a callable taking one line of
+    text), when given, gets the mesh's size, its certified tolerances and whether it is watertight."""
     from rgm.atomic import write_atomic
 
     fmt = fmt.lower()
     if fmt not in ("stl", "obj", "ply", "glb"):
         raise BackendError(f"unknown mesh format {fmt!r}; choose stl, obj, ply or glb")
-    vertices, triangles = tessellate(model, model.tolerance if tol is None else tol, angle_tol)
+    tol = model.tolerance if tol is None else tol
+    vertices, triangles = tessellate(model, tol, angle_tol)
     import trimesh
 
     data = trimesh.Trimesh(vertices, triangles, process=False).export(file_type=fmt)
-    return write_atomic(path, data)
+    out = write_atomic(path, data)
+    if report is not None:
+        bad = open_edges(triangles)
+        angle = f", normals within {np.degrees(angle_tol):g} deg" if angle_tol else ""
+        report(f"{len(triangles)} triangles, {len(vertices)} vertices, chordal deviation <= {tol:g} {model.units} "
+               f"(measured on every triangle){angle}; "
+               + ("watertight" if bad == 0 else f"{bad} open or non-manifold edges (open surfaces have a border)"))
+    return out

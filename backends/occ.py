@@ -569,10 +569,12 @@ def _write_step_file(pairs, path, schema, units):
         raise BackendError(f"OpenCASCADE could not write {path}")
 
 
-def write_step(model, path, *, schema: str = "AP214", verify: bool = False, tol: float | None = None, **ignored):
+def write_step(model, path, *, schema: str = "AP214", verify: bool = False, tol: float | None = None,
+               report=None, **ignored):
     """Write the exported objects of `model` as STEP (AP214 by default; AP203, AP242) in model units,
     binding names as product names. With `verify`, the temporary file is read back, checked and its
-    deviation measured (`verify_step`); a failing file is removed and BackendError raised."""
+    deviation measured (`verify_step`); a failing file is removed and BackendError raised, a passing
+    one's figures are given to `report` (a callable taking one line of text) when there is one."""
     from rgm.atomic import temp_path_beside
 
     schema = schema.upper()
@@ -585,7 +587,11 @@ def write_step(model, path, *, schema: str = "AP214", verify: bool = False, tol:
     try:
         _write_step_file(pairs, tmp, schema, UNITS[model.units])
         if verify:
-            verify_step(model, tmp, tol=tol, expected=[shape for _, shape in pairs])
+            figures = verify_step(model, tmp, tol=tol, expected=[shape for _, shape in pairs])
+            if report is not None:
+                report(f"verified {path}: read back by STEPControl_Reader, valid (BRepCheck_Analyzer), "
+                       f"{figures['faces']} faces of the same surface types, max deviation from the model "
+                       f"{figures['max']:.3g} {model.units} (limit {figures['limit']:.3g})")
         os.replace(tmp, path)
     finally:
         if tmp.exists():
@@ -695,11 +701,12 @@ def is_valid(shape) -> bool:
     return bool(BRepCheck_Analyzer(shape).IsValid())
 
 
-def verify_step(model, path, *, tol: float | None = None, samples: int = 60, expected=None) -> float:
+def verify_step(model, path, *, tol: float | None = None, samples: int = 60, expected=None) -> dict:
     """Read `path` back and check it: valid by ``BRepCheck_Analyzer``; with `expected` (the shapes that
     were written) the same number of faces with the same surface types; and every exported face's
     points (rgm's own evaluation, `samples` per face from a coarse mesh) within `tol` (default: 1e-7 x
-    model size, at least 1e-9) of the read-back shape. Returns the measured max deviation (model units)."""
+    model size, at least 1e-9) of the read-back shape. Returns {"faces": read-back face count, "max": the
+    measured max deviation, "limit": its limit} (model units)."""
     from collections import Counter
 
     from rgm.backends.mesh import face_samples
@@ -721,4 +728,4 @@ def verify_step(model, path, *, tol: float | None = None, samples: int = 60, exp
     worst = float(distances_to_shape(pts, shape).max()) if len(pts) else 0.0
     if not worst <= limit:
         raise BackendError(f"{path}: the STEP file deviates {worst:.3g} from the model (limit {limit:.3g})")
-    return worst
+    return {"faces": len(faces_of(shape)), "max": worst, "limit": limit}

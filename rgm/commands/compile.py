@@ -176,13 +176,15 @@ def run(args) -> int:
             print(f"rgmc compile: error: -t {args.target} does not take {flag}", file=sys.stderr)
             return 2
         kwargs[key] = value
-    unknown = sorted(set(options) - accepted)
+    unknown = sorted((set(options) - accepted) | ({"report"} & set(options)))
     if unknown:
-        known = ", ".join(sorted(accepted - {"tol", "angle_tol", "verify", "fmt"})) or "none"
+        known = ", ".join(sorted(accepted - {"tol", "angle_tol", "verify", "fmt", "report"})) or "none"
         print(f"rgmc compile: error: -t {args.target} has no option {', '.join(unknown)} (its options: {known})",
               file=sys.stderr)
         return 2
     kwargs.update(options)
+    if "report" in accepted:   # what the writer measured (verification, mesh size) is printed
+        kwargs["report"] = lambda line: print(line, file=sys.stderr)
     existed = out.exists()
     try:
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -357,6 +357,20 @@ def test_write_mesh_formats_read_back(tmp_path, fmt):
     assert loaded.volume == pytest.approx(signed_volume(v, t), rel=1e-5)
 
 
+def test_write_mesh_reports_size_and_watertightness(tmp_path):
+    """The report line (`rgmc compile` prints it) gives the file's triangle count and says watertight only
+    for a closed mesh: the pin is, one open patch is not (its border edges are counted, as trimesh does)."""
+    trimesh = pytest.importorskip("trimesh")
+    lines = []
+    path = write_mesh(pin_model(), tmp_path / "pin.stl", fmt="stl", tol=0.1, report=lines.append)
+    assert f"{len(trimesh.load(path).faces)} triangles" in lines[0] and lines[0].endswith("watertight")
+    patch = Model("mm", 0.01, {"s": BSplineSurface(random_surface(3))}, ("s",))
+    path = write_mesh(patch, tmp_path / "s.stl", fmt="stl", tol=0.1, report=lines.append)
+    mesh = trimesh.load(path)
+    border = int((np.bincount(mesh.edges_unique_inverse) == 1).sum())
+    assert not mesh.is_watertight and f"; {border} open or non-manifold edges" in lines[1]
+
+
 def test_bad_requests_are_clear_errors(tmp_path):
     with pytest.raises(BackendError, match="positive"):
         tessellate(pin_model(), 0.0)

@@ -243,3 +243,24 @@ def test_the_first_step_file_of_a_process_has_the_schema_and_units_asked(tmp_pat
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
     text = out.read_text()
     assert "AP242" in text and "SI_UNIT(.CENTI.,.METRE.)" in text
+
+
+def test_compile_verify_prints_what_it_measured(tmp_path, capsys):
+    """`rgmc compile -t step --verify` says what the read-back showed: face count and the measured max
+    deviation, which is the file's own (the same figure `verify_step` measures again on the output)."""
+    import re
+
+    from rgm.cli import main
+
+    src = tmp_path / "pin.rgm"
+    src.write_text(Path("examples/pin.rgm").read_text())
+    out = tmp_path / "pin.step"
+    assert main(["compile", str(src), "-t", "step", "-o", str(out), "--verify"]) == 0
+    err = capsys.readouterr().err
+    m = re.search(r"(\d+) faces of the same surface types, max deviation from the model (\S+) mm \(limit (\S+)\)", err)
+    assert m, err
+    import rgm
+
+    again = occ.verify_step(rgm.load(src), out)
+    assert int(m.group(1)) == again["faces"] == 5
+    assert float(m.group(2)) == pytest.approx(again["max"], rel=1e-2, abs=1e-15) and float(m.group(2)) <= float(m.group(3))
