@@ -30,7 +30,7 @@ import numpy as np
 from rgm.errors import BackendError
 
 from .mesh_cdt import Incremental, OnSegment, constrained_delaunay, inside_loops
-from .mesh_edges import CERTIFY, Edges, segment_distance
+from .mesh_edges import CERTIFY, Edges, segment_distance, uv_of
 from .mesh_faces import collect_faces
 from .mesh_planar import plane_frame, simple_loops
 
@@ -142,21 +142,20 @@ class _FaceMesher:
     def _boundary(self):
         """Boundary samples (uv, vertex ids), loops and segments from the current edge sampling."""
         face, edges = self.face, self.edges
-        uvs, ids, groups, reps, loops = [], [], [], [], []
+        params, ids, groups, reps, loops = [], [], [], [], []
         n0 = 0
         for loop, pids in zip(face.loops, self.piece_ids):
-            luv, lid = [], []
+            n = 0
             for piece, j in zip(loop, pids):
                 s, vid, g, idx = edges.samples(j, _degenerate_s(piece, face.grid) if edges.degenerate[j] else None)
-                luv.append(piece.uv(s)[:-1])
-                lid.append(vid[:-1])
+                params.append(s[:-1])
+                ids.append(vid[:-1])
                 groups.append(np.full(len(s) - 1, g))
                 reps.append(np.minimum(idx[:-1], idx[1:]))
-            n = sum(len(x) for x in luv)
+                n += len(s) - 1
             loops.append(n0 + np.arange(n))
-            uvs += luv
-            ids += lid
             n0 += n
+        uvs = uv_of([p for loop in face.loops for p in loop], params)   # one projection for all pieces
         self.loops = loops
         self.segments = np.concatenate([np.column_stack([lp, np.roll(lp, -1)]) for lp in loops]).astype(np.int64)
         self.b_uv = np.concatenate(uvs)

@@ -35,11 +35,36 @@ class Piece:
         uv = self.uv(np.clip(np.asarray(s, float), 0.0, 1.0))
         return self.patch.evaluate(uv[:, 0], uv[:, 1])
 
+def uv_of(pieces, params) -> list:
+    """[uv (k_i, 2)] of pieces[i] at parameters params[i] (k_i,) (clipped into [0, 1]). Pieces that
+    follow a 3-D curve's closest points on their patch (`rgm.backends.mesh_faces._Projected`) are
+    projected together, one Gauss-Newton run per patch for all of them: a part's trimming curves
+    would otherwise cost one run per piece and call."""
+    from .mesh_faces import ITERATIONS, _Projected
+
+    params = [np.clip(np.asarray(s, float), 0.0, 1.0) for s in params]
+    out = [None] * len(pieces)
+    batches = {}
+    for i, p in enumerate(pieces):
+        if isinstance(p.uv, _Projected):
+            batches.setdefault(id(p.uv.patch), []).append(i)
+        else:
+            out[i] = p.uv(params[i])
+    for idx in batches.values():
+        starts = [pieces[i].uv.start(params[i]) for i in idx]
+        uv, dist = pieces[idx[0]].uv.patch.project(np.concatenate([x for x, _ in starts]),
+                                                   np.concatenate([g for _, g in starts]), iterations=ITERATIONS)
+        cut = np.cumsum([len(params[i]) for i in idx[:-1]])
+        for i, (x, _), u, d in zip(idx, starts, np.split(uv, cut), np.split(dist, cut)):
+            out[i] = pieces[i].uv.finish(params[i], x, u, d)
+    return out
+
+
 def xyz_of(pieces, params) -> list:
-    """[xyz (k_i, 3)] of pieces[i] at parameters params[i] (k_i,): the (u, v) of all pieces on one
-    surface (`Patch.whole`: sub-patches between creases share their surface's) are evaluated in one
-    call rather than one call per piece, which is what small models spend their time on."""
-    uv = [p.uv(np.clip(np.asarray(s, float), 0.0, 1.0)) for p, s in zip(pieces, params)]
+    """[xyz (k_i, 3)] of pieces[i] at parameters params[i] (k_i,): the (u, v) of all pieces (`uv_of`),
+    and those on one surface (`Patch.whole`: sub-patches between creases share their surface's)
+    evaluated in one call rather than one call per piece, which is what small models spend their time on."""
+    uv = uv_of(pieces, params)
     groups = {}
     for i, p in enumerate(pieces):
         groups.setdefault(id(p.patch.whole), []).append(i)
@@ -203,14 +228,16 @@ class Edges:
         self.group = -np.ones(len(self.pieces), int)
         self.same_dir = np.ones(len(self.pieces), bool)
         reps = []
+        ends_of = {}   # pieces by their pair of corners: only those can coincide
+        for i in np.flatnonzero(~self.degenerate).tolist():
+            ends_of.setdefault(tuple(sorted(self.corner[i].tolist())), []).append(i)
         for i, p in enumerate(self.pieces):
             if self.degenerate[i] or self.group[i] >= 0:
                 continue
             self.group[i] = len(reps)
             reps.append(i)
-            key = set(self.corner[i])
-            for j in range(i + 1, len(self.pieces)):
-                if self.group[j] >= 0 or self.degenerate[j] or set(self.corner[j]) != key:
+            for j in ends_of[tuple(sorted(self.corner[i].tolist()))]:
+                if j <= i or self.group[j] >= 0:
                     continue
                 same = _parallel(probe[i], probe[j], eps)   # same parameterisation, either way round
                 if same is None:

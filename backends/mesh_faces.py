@@ -180,7 +180,7 @@ def _project_onto(pieces, patch, tol):
         if isinstance(c, NurbsCurve):
             seam_sides = [(a, lo, hi, sides[k, a]) for a, lo, hi in seams]
             uv, dist = tables[k]
-            pieces[k] = Piece(patch, _seam_aware(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist),
+            pieces[k] = Piece(patch, _Projected(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist),
                               _knot_breaks(c, *c.domain))
 
 
@@ -193,29 +193,46 @@ def _on_sides(uv, s, seams):
     return uv
 
 
-def _seam_aware(patch, curve, seams, table_uv, table_dist):
-    """uv(s) of the closest points of `curve` (s in [0, 1] over its domain) on the seam sides chosen
-    (`_on_sides`). The closest points at equally spaced parameters (`table_uv`, at distances
-    `table_dist`: how far the curve lies off the surface) are interpolated as Gauss-Newton's guesses,
-    so the many small calls of edge sampling are local refinements; a point that ends farther from
-    the surface than twice the table's worst (plus 1e-9 of the table's extent) is searched globally."""
-    t0, t1 = curve.domain
-    at = _points_of(curve)
-    probe = np.linspace(0.0, 1.0, len(table_uv))
-    extent = np.ptp(patch.evaluate(table_uv[:, 0], table_uv[:, 1]), axis=0).max()
-    limit = 2 * float(table_dist.max()) + 1e-9 * float(extent)
+class _Projected:
+    """uv(s) of the closest points of a 3-D `curve` (s in [0, 1] over its domain) on the patch, on the
+    seam sides chosen (`_on_sides`). The closest points at equally spaced parameters (`table_uv`, at
+    distances `table_dist`: how far the curve lies off the surface) are interpolated as Gauss-Newton's
+    guesses, so the many small calls of edge sampling are local refinements; a point that ends farther
+    from the surface than twice the table's worst (plus 1e-9 of the table's extent) is searched
+    globally. Called as a function; `rgm.backends.mesh_edges.uv_of` runs the Gauss-Newton steps of all
+    the pieces on one patch together (`start`, one `Patch.project`, `finish`)."""
 
-    def uv(s):
-        s = np.asarray(s, float)
-        x = at(t0 + s * (t1 - t0))
-        guess = np.column_stack([np.interp(s, probe, table_uv[:, 0]), np.interp(s, probe, table_uv[:, 1])])
-        out, dist = patch.project(x, guess, iterations=3)
-        far = dist > limit
+    def __init__(self, patch, curve, seams, table_uv, table_dist):
+        self.patch, self.seams = patch, seams
+        self.t0, self.t1 = curve.domain
+        self.at = _points_of(curve)
+        self.table_uv = table_uv
+        self.probe = np.linspace(0.0, 1.0, len(table_uv))
+        extent = np.ptp(patch.evaluate(table_uv[:, 0], table_uv[:, 1]), axis=0).max()
+        self.limit = 2 * float(table_dist.max()) + 1e-9 * float(extent)
+
+    def start(self, s):
+        """(points (k, 3) of the curve, parameter guesses (k, 2)) at s (k,)."""
+        x = self.at(self.t0 + s * (self.t1 - self.t0))
+        guess = np.column_stack([np.interp(s, self.probe, self.table_uv[:, 0]),
+                                 np.interp(s, self.probe, self.table_uv[:, 1])])
+        return x, guess
+
+    def finish(self, s, x, uv, dist):
+        """uv (k, 2) of `project`ed points x, with the points left far off searched globally."""
+        far = dist > self.limit
         if far.any():
-            out[far] = patch.closest(x[far])[0]
-        return _on_sides(out, s, seams)
+            uv[far] = self.patch.closest(x[far])[0]
+        return _on_sides(uv, s, self.seams)
 
-    return uv
+    def __call__(self, s):
+        s = np.asarray(s, float)
+        x, guess = self.start(s)
+        return self.finish(s, x, *self.patch.project(x, guess, iterations=ITERATIONS))
+
+
+#: Gauss-Newton steps of a trimming curve's closest points from the interpolated table guesses
+ITERATIONS = 3
 
 
 def _rectangle(patch) -> list:
@@ -264,16 +281,18 @@ def _trimmed_face(face, tol):
             raise BackendError("an infinite plane needs an outer loop to be meshed")
         patch = surface_patch(surface, trimmed=bool(face.holes))   # holes live in rgm's (u, v)
         return Face(patch, _rectangle(patch) + [_loop_pieces(h, surface, patch, tol) for h in face.holes], True)
-    box = None
-    if isinstance(surface, Plane):  # the patch box: the loops' plane coordinates
-        probe = PlanePatchBox(surface)
-        uv = np.concatenate([p.uv(np.linspace(0, 1, 65)) for loop in face.loops()
-                             for p in _loop_pieces(loop, surface, probe, tol)])
-        lo, hi = uv.min(0), uv.max(0)
-        pad = 1e-9 * float(np.max(hi - lo)) + 1e-12
-        box = ((lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad))
-    patch = surface_patch(surface, trimmed=True, plane_box=box)
-    return Face(patch, [_loop_pieces(loop, surface, patch, tol) for loop in face.loops()], True)
+    if not isinstance(surface, Plane):
+        patch = surface_patch(surface, trimmed=True)
+        return Face(patch, [_loop_pieces(loop, surface, patch, tol) for loop in face.loops()], True)
+    # a plane's patch box: the loops' plane coordinates (which do not depend on the box)
+    loops = [_loop_pieces(loop, surface, PlanePatchBox(surface), tol) for loop in face.loops()]
+    uv = np.concatenate([p.uv(np.linspace(0, 1, 65)) for loop in loops for p in loop])
+    lo, hi = uv.min(0), uv.max(0)
+    pad = 1e-9 * float(np.max(hi - lo)) + 1e-12
+    patch = surface_patch(surface, trimmed=True, plane_box=((lo[0] - pad, hi[0] + pad), (lo[1] - pad, hi[1] + pad)))
+    for piece in (p for loop in loops for p in loop):
+        piece.patch = patch
+    return Face(patch, loops, True)
 
 
 class PlanePatchBox(Patch):

@@ -58,8 +58,11 @@ class Plane(Surface):
 
     def coordinates(self, points) -> np.ndarray:
         """(k, 2) plane coordinates (u, v) of points (k, 3) (their projections)."""
-        d = np.asarray(points, float) - self.origin
-        return np.column_stack([d @ self.x_dir, d @ self.y_dir])
+        axes = self.__dict__.get("_axes")
+        if axes is None:   # (3, 2): x_dir, y_dir as columns, kept (meshing maps many small batches)
+            axes = np.column_stack([self.x_dir, self.y_dir])
+            object.__setattr__(self, "_axes", axes)
+        return (np.asarray(points, float) - self.origin) @ axes
 
     def nurbs(self, size: float | None = None, center=(0.0, 0.0)):
         """Bilinear NurbsSurface over the square [cu - size, cu + size] x [cv - size, cv + size] of
