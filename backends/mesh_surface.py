@@ -88,10 +88,14 @@ class Patch:
         return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-300)
 
     def project(self, points, uv0, iterations: int = 6):
-        """Gauss-Newton closest points from guesses uv0 (m, 2): (uv (m, 2), distance (m,))."""
+        """Gauss-Newton closest points from guesses uv0 (m, 2): (uv (m, 2), distance (m,)). Stops early
+        once no step moves a parameter by more than 1e-14 of the domain (converged: the steps left
+        would be round-off)."""
         x = np.asarray(points, float)
         uv = self.clamp(np.asarray(uv0, float))
-        for _ in range(iterations):
+        (u0, u1), (v0, v1) = self.domain
+        still = 1e-14 * np.array([u1 - u0, v1 - v0])
+        for k in range(iterations):
             s, su, sv = self.d1(uv[:, 0], uv[:, 1])
             r = x - s
             a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
@@ -101,7 +105,10 @@ class Patch:
             ok = np.abs(det) > 0
             du = np.where(ok, ((a22 + reg) * b1 - a12 * b2) / np.where(ok, det, 1.0), 0.0)
             dv = np.where(ok, ((a11 + reg) * b2 - a12 * b1) / np.where(ok, det, 1.0), 0.0)
-            uv = self.clamp(uv + np.column_stack([du, dv]))
+            step = np.column_stack([du, dv])
+            uv = self.clamp(uv + step)
+            if k + 1 < iterations and (np.abs(step) <= still).all():
+                break
         dist = np.linalg.norm(x - self.evaluate(uv[:, 0], uv[:, 1]), axis=1)
         return uv, dist
 

@@ -105,14 +105,66 @@ class _Arg:
 
 def _bracketed(open_: str, items: list[_Arg], close: str, indent: int, column: int) -> str:
     """`open_ a, b close` on one line when it fits, else one item per line with a trailing comma."""
-    flat = open_ + ", ".join(it.text(indent, column) for it in items) + close
-    if "\n" not in flat and column + len(flat) + 1 <= WIDTH:   # + 1: the `,` or `;` after it
+    flat = _flat_items(open_, items, close, WIDTH - column - 1)   # - 1: the `,` or `;` after it
+    if flat is not None:
         return flat
     if not items:
         return open_ + close
     inner = indent + len(INDENT)
     body = [" " * inner + it.text(inner, inner) + "," for it in items]
     return open_ + "\n" + "\n".join(body) + "\n" + " " * indent + close
+
+
+def _flat_items(open_: str, items: list[_Arg], close: str, room: int) -> str | None:
+    """`open_ a, b close` on one line if that is at most `room` columns, else None."""
+    parts, used = [], len(open_) + len(close) + 2 * max(len(items) - 1, 0)
+    for it in items:
+        head = f"{it.key}: " if it.key is not None else ""
+        text = _flat(it.expr, room - used - len(head))
+        if text is None:
+            return None
+        parts.append(head + text)
+        used += len(head) + len(text)
+    return open_ + ", ".join(parts) + close if used <= room else None
+
+
+def _flat(e, room: int) -> str | None:
+    """The one-line text of `e` (what `_expr` prints when it fits) if at most `room` columns, else None
+    (a 2-D net is never one line). The work stops at `room`: deciding whether a call fits costs the
+    width of a line, not a render of its whole subtree at each level of nesting."""
+    if room < 0:
+        return None
+    if isinstance(e, (A.Number, A.Name, A.String)):
+        text = _expr(e, 0, 0)
+    elif isinstance(e, A.Call):
+        return _flat_items(e.func.id + "(", [_Arg(None, a) for a in e.args] + [_Arg(k, v) for k, v in e.kwargs],
+                           ")", room)
+    elif isinstance(e, A.ListExpr):
+        return _flat_items("[", [_Arg(None, a) for a in e.items], "]", room)
+    elif isinstance(e, A.BinOp):
+        p = _PREC[e.op]
+        left = _flat_wrap(e.left, _prec(e.left) < p, room)
+        right = None if left is None else _flat_wrap(e.right, _prec(e.right) <= p, room - len(left) - len(e.op) - 2)
+        text = None if right is None else f"{left} {e.op} {right}"
+    elif isinstance(e, A.Neg):
+        inner = _flat_wrap(e.operand, _prec(e.operand) < 3, room - 1)
+        text = None if inner is None else "-" + inner
+    elif isinstance(e, A.Member):
+        obj = _flat_wrap(e.obj, _prec(e.obj) < 4 or isinstance(e.obj, A.Number), room - len(e.attr) - 1)
+        text = None if obj is None else f"{obj}.{e.attr}"
+    elif isinstance(e, A.Net):
+        text = _expr(e, 0, 0) if len(e.shape) == 1 and e.data.size <= room else None
+        text = None if text is None or "\n" in text else text
+    else:
+        raise TypeError(f"not an expression: {e!r}")
+    return text if text is not None and len(text) <= room else None
+
+
+def _flat_wrap(e, paren: bool, room: int) -> str | None:
+    if not paren:
+        return _flat(e, room)
+    inner = _flat(e, room - 2)
+    return None if inner is None else "(" + inner + ")"
 
 
 def _prec(e) -> int:

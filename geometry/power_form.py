@@ -11,6 +11,8 @@ are left to the exact evaluators.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from rgm.geometry.basis import basis_derivatives_t
@@ -37,8 +39,15 @@ def _span_matrices(knots, degree):
     5e-4 long (seed 124 of the power-form test in tests/backends/test_mesh_tessellate.py). The midpoint
     keeps |x|^a <= 2^-a: expanded about the span's start (x in [0, 1]) the coefficients are larger, and
     the long spans of that surface lost 7e-12 in Su and 6e-13 in the points (6e-14 and 5e-15 here)."""
-    p = degree
     knots = np.asarray(knots, float)
+    return _span_matrices_of(knots.tobytes(), degree)
+
+
+@lru_cache(maxsize=256)
+def _span_matrices_of(key: bytes, p: int):
+    """`_span_matrices` of the knot vector whose float64 bytes are `key`: kept, since a part's trimming
+    curves share a few knot vectors (lines, arcs) and each is put in power form (read-only results)."""
+    knots = np.frombuffer(key, float)
     lo, hi = knots[p], knots[len(knots) - p - 1]
     breaks = np.unique(knots[(knots >= lo) & (knots <= hi)])
     spans = np.searchsorted(knots, breaks[:-1], side="right") - 1
