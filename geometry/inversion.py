@@ -24,7 +24,7 @@ import numpy as np
 
 from rgm.errors import GeometryError
 
-__all__ = ["closest_point_curve", "closest_point_surface"]
+__all__ = ["closest_point_curve", "closest_point_surface", "distance_bound_surface"]
 
 SEEDS = 6          # Newton starts per query point (surfaces: 4 basins + 2 nearest)
 COARSE, FINE = 40, 240   # samples per direction (about) of the surface seed grids
@@ -250,3 +250,33 @@ def closest_point_surface(surface, points):
     x, dist, f = _newton(evaluate, x0, lo, hi, target)
     uv, pts, dist = _best(queries, x, dist, f, count)
     return uv[:, 0], uv[:, 1], pts, dist
+
+
+def distance_bound_surface(surface, points, iterations: int = 5):
+    """Upper bounds (k,) of the distances of `points (k, 3)` to `surface`: each the distance to a point of
+    the surface found locally (the nearest node of the coarse seed grid, then Gauss-Newton steps, the
+    least distance met kept). A bound whatever the start, since it is a distance to the surface, and
+    tight for points near it: enough to decide that points lie within a tolerance of the surface
+    without the global search of `closest_point_surface`, which only the points left over need."""
+    from scipy.spatial import cKDTree
+
+    queries = _queries(points, 3)
+    gu, _ = _samples(surface.knots_u, surface.degree_u, surface.nu, _polygon(surface.ctrl, 0), COARSE)
+    gv, _ = _samples(surface.knots_v, surface.degree_v, surface.nv, _polygon(surface.ctrl, 1), COARSE)
+    nodes = surface.evaluate_grid(gu, gv).reshape(-1, 3)
+    best, idx = cKDTree(nodes).query(queries)
+    uv = np.stack([gu[idx // gv.size], gv[idx % gv.size]], axis=1)
+    (u0, u1), (v0, v1) = surface.domain
+    for _ in range(iterations):
+        d = surface.derivatives(uv[:, 0], uv[:, 1], 1)
+        su, sv, r = d[1, 0], d[0, 1], queries - d[0, 0]
+        best = np.minimum(best, np.linalg.norm(r, axis=1))
+        a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
+        b1, b2 = (su * r).sum(1), (sv * r).sum(1)
+        det = a11 * a22 - a12 * a12
+        ok = np.abs(det) > 1e-300
+        det = np.where(ok, det, 1.0)
+        step = np.stack([np.where(ok, (a22 * b1 - a12 * b2) / det, 0.0),
+                         np.where(ok, (a11 * b2 - a12 * b1) / det, 0.0)], axis=1)
+        uv = np.stack([np.clip(uv[:, 0] + step[:, 0], u0, u1), np.clip(uv[:, 1] + step[:, 1], v0, v1)], axis=1)
+    return np.minimum(best, np.linalg.norm(queries - surface.evaluate(uv[:, 0], uv[:, 1]), axis=1))

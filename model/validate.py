@@ -277,7 +277,9 @@ def _loop(face: O.TrimmedFace, lp: O.Loop, tol: float, out: list) -> None:
     if lp.is_lazy:
         return  # checked when the intersection is approximated
     surface = face.surface
-    placed = [(_inside_domain if p.dim == 2 else _lies_on)(surface, p, i, tol, lp) for i, p in enumerate(lp.pieces)]
+    dist = _distances_3d(surface, lp.pieces, tol)
+    placed = [_inside_domain(surface, p, i, tol, lp) if p.dim == 2 else _lies_on(dist.get(i), i, tol, lp)
+              for i, p in enumerate(lp.pieces)]
     problems = [d for d in placed if d is not None]
     out.extend(problems)
     if problems:
@@ -300,16 +302,36 @@ def _inside_domain(surface, piece, i: int, tol: float, lp) -> Diagnostic | None:
     return None
 
 
-def _lies_on(surface, piece, i: int, tol: float, lp) -> Diagnostic | None:
-    n = piece.nurbs()
-    pts = n.evaluate(np.linspace(*n.domain, _SAMPLES))
+def _distances_3d(surface, pieces, tol: float) -> dict:
+    """{i: distances (_SAMPLES,) of piece i's samples to the surface} for the model-space (3-D) pieces
+    of a loop (pieces whose surface has no NURBS form are left out). All the loop's samples are
+    bounded in one local search (`distance_bound_surface`); only those it does not find within the
+    tolerance get the global search, so the figure reported for a piece off the surface is exact."""
+    curves = {i: p.nurbs() for i, p in enumerate(pieces) if p.dim == 3}
+    pts = {i: c.evaluate(np.linspace(*c.domain, _SAMPLES)) for i, c in curves.items()}
+    if not pts:
+        return {}
     if isinstance(surface, O.Plane):
-        dist = np.abs(surface.signed_distance(pts))
-    else:
-        try:
-            dist = surface.nurbs().closest_point(pts)[3]
-        except GeometryError:
-            return None
+        return {i: np.abs(surface.signed_distance(x)) for i, x in pts.items()}
+    from rgm.geometry.inversion import distance_bound_surface
+
+    try:
+        nurbs = surface.nurbs()
+        every = np.concatenate(list(pts.values()))
+        dist = distance_bound_surface(nurbs, every)
+        far = dist > tol
+        if far.any():
+            dist[far] = nurbs.closest_point(every[far])[3]
+    except GeometryError:
+        return {}
+    return dict(zip(pts, np.split(dist, np.cumsum([len(x) for x in pts.values()])[:-1])))
+
+
+def _lies_on(dist, i: int, tol: float, lp) -> Diagnostic | None:
+    """E0507 when the samples of 3-D piece i (at distances `dist`, None: not measurable) leave the surface."""
+    if dist is None:
+        return None
+    piece = lp.pieces[i]
     if dist.max() > tol:
         return error("E0507", f"loop piece {i + 1} is {dist.max():.3g} away from the trimmed surface "
                               f"(tolerance {tol:g})", _span(piece, lp), "not on the surface",

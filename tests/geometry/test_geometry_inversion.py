@@ -38,6 +38,36 @@ def test_surface_closest_points_are_minima(s, seed):
     assert np.all((u >= u0) & (u <= u1) & (v >= v0) & (v <= v1))
 
 
+@SETTINGS
+@given(surfaces(), st.integers(0, 2**31))
+def test_distance_bound_is_a_bound(s, seed):
+    """`distance_bound_surface` (the model check that 3-D trimming curves lie on their surface: samples
+    it does not find within the tolerance get the global search) never reports less than the true
+    distance, on any surface, for points anywhere."""
+    from rgm.geometry.inversion import distance_bound_surface
+
+    rng = np.random.default_rng(seed)
+    (u0, u1), (v0, v1) = s.domain
+    pts = np.concatenate([rng.uniform(-1.5, 1.5, (60, 3)), s.evaluate(rng.uniform(u0, u1, 60), rng.uniform(v0, v1, 60))])
+    assert np.all(distance_bound_surface(s, pts) >= s.closest_point(pts)[3] - 1e-12 * size(s))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_distance_bound_finds_points_on_a_smooth_patch(seed):
+    """On a smooth bicubic patch (a fitted scan's kind) every point of the surface is found on it, so
+    the global search is left for points that are off it."""
+    from rgm.geometry import NurbsSurface
+    from rgm.geometry.inversion import distance_bound_surface
+
+    rng = np.random.default_rng(seed)
+    k = np.concatenate([np.zeros(4), np.sort(rng.uniform(0.1, 0.9, 4)), np.ones(4)])
+    g = np.linspace(0, 100, 8)
+    x, y = np.meshgrid(g, g, indexing="ij")
+    s = NurbsSurface(3, 3, k, k, np.stack([x, y, rng.uniform(-15, 15, (8, 8))], axis=-1), rng.uniform(0.5, 2, (8, 8)))
+    on = s.evaluate(rng.uniform(0, 1, 500), rng.uniform(0, 1, 500))
+    assert distance_bound_surface(s, on).max() <= 1e-9 * 100
+
+
 def test_interior_minimum_is_stationary_and_circle_is_exact():
     circle = circle_curve([0, 0, 0], [0, 0, 1], 2.0)
     rng = np.random.default_rng(4)
