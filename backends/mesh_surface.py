@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rgm.geometry.inversion import gauss_newton_step
 from rgm.geometry.power_form import power_form
 
 
@@ -97,14 +98,7 @@ class Patch:
         still = 1e-14 * np.array([u1 - u0, v1 - v0])
         for k in range(iterations):
             s, su, sv = self.d1(uv[:, 0], uv[:, 1])
-            r = x - s
-            a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
-            b1, b2 = (su * r).sum(1), (sv * r).sum(1)
-            reg = 1e-14 * (a11 + a22) + 1e-300
-            det = (a11 + reg) * (a22 + reg) - a12 * a12
-            ok = np.abs(det) > 0
-            du = np.where(ok, ((a22 + reg) * b1 - a12 * b2) / np.where(ok, det, 1.0), 0.0)
-            dv = np.where(ok, ((a11 + reg) * b2 - a12 * b1) / np.where(ok, det, 1.0), 0.0)
+            du, dv = gauss_newton_step(su, sv, x - s)
             step = np.column_stack([du, dv])
             uv = self.clamp(uv + step)
             if k + 1 < iterations and (np.abs(step) <= still).all():

@@ -24,7 +24,7 @@ import numpy as np
 
 from rgm.errors import GeometryError
 
-__all__ = ["closest_point_curve", "closest_point_surface", "distance_bound_surface"]
+__all__ = ["closest_point_curve", "closest_point_surface", "distance_bound_surface", "gauss_newton_step"]
 
 SEEDS = 6          # Newton starts per query point (surfaces: 4 basins + 2 nearest)
 COARSE, FINE = 40, 240   # samples per direction (about) of the surface seed grids
@@ -271,12 +271,20 @@ def distance_bound_surface(surface, points, iterations: int = 5):
         d = surface.derivatives(uv[:, 0], uv[:, 1], 1)
         su, sv, r = d[1, 0], d[0, 1], queries - d[0, 0]
         best = np.minimum(best, np.linalg.norm(r, axis=1))
-        a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
-        b1, b2 = (su * r).sum(1), (sv * r).sum(1)
-        det = a11 * a22 - a12 * a12
-        ok = np.abs(det) > 1e-300
-        det = np.where(ok, det, 1.0)
-        step = np.stack([np.where(ok, (a22 * b1 - a12 * b2) / det, 0.0),
-                         np.where(ok, (a11 * b2 - a12 * b1) / det, 0.0)], axis=1)
-        uv = np.stack([np.clip(uv[:, 0] + step[:, 0], u0, u1), np.clip(uv[:, 1] + step[:, 1], v0, v1)], axis=1)
+        du, dv = gauss_newton_step(su, sv, r)
+        uv = np.stack([np.clip(uv[:, 0] + du, u0, u1), np.clip(uv[:, 1] + dv, v0, v1)], axis=1)
     return np.minimum(best, np.linalg.norm(queries - surface.evaluate(uv[:, 0], uv[:, 1]), axis=1))
+
+
+def gauss_newton_step(su, sv, r):
+    """(du (m,), dv (m,)): the Gauss-Newton step of |S(u, v) - X|^2 at partials su, sv (m, 3) and residual
+    r = X - S (m, 3), from the normal equations [Su.Su Su.Sv; Su.Sv Sv.Sv] d = [Su.r; Sv.r] with a
+    relative 1e-14 on the diagonal (a degenerate point, such as a pole, takes a zero step)."""
+    a11, a12, a22 = (su * su).sum(1), (su * sv).sum(1), (sv * sv).sum(1)
+    b1, b2 = (su * r).sum(1), (sv * r).sum(1)
+    reg = 1e-14 * (a11 + a22) + 1e-300
+    det = (a11 + reg) * (a22 + reg) - a12 * a12
+    ok = np.abs(det) > 0
+    du = np.where(ok, ((a22 + reg) * b1 - a12 * b2) / np.where(ok, det, 1.0), 0.0)
+    dv = np.where(ok, ((a11 + reg) * b2 - a12 * b1) / np.where(ok, det, 1.0), 0.0)
+    return du, dv
