@@ -161,7 +161,12 @@ def _project_onto(pieces, patch, tol):
     probe = np.linspace(0.0, 1.0, 33)
     curves = [k for k, c in enumerate(pieces) if isinstance(c, NurbsCurve)]
     x = np.concatenate([pieces[k].evaluate(pieces[k].domain[0] + probe * np.ptp(pieces[k].domain)) for k in curves])
-    uv, dist = patch.closest(x, grid=32)   # one search for all the loop's curves, which lie on the surface
+    # one search for all the loop's curves: they lie on the surface, so the nearest grid node's basin is
+    # nearly always the closest point's; the points not found on the surface get all four starts
+    uv, dist = patch.closest(x, grid=32, starts=1)
+    redo = dist > 1e-9 * float(np.ptp(x, axis=0).max())
+    if redo.any():
+        uv[redo], dist[redo] = patch.closest(x[redo], grid=32)
     m = len(probe)
     tables = {k: (uv[i * m:(i + 1) * m], dist[i * m:(i + 1) * m]) for i, k in enumerate(curves)}
     sides = {}
