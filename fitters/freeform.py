@@ -317,6 +317,27 @@ class ScatteredBasis:
         return M, rhs
 
 
+@dataclass(frozen=True)
+class Anchors:
+    """Points a fitted surface is pulled through at fixed parameters: a penalty constraint in the least
+    squares (`solve_scattered`), not data (the residuals and the certificate are the data's alone).
+    uv (k, 2) in the surface's parameters, xyz (k, 3); `weight` each, relative to a data point's. With
+    `tol`, the refinement (`rgm.fitters.freeform_surface.fit_surface`) also inserts knots in the spans
+    whose anchors are missed by more, until their 95th percentile is within it (where the data allow)."""
+
+    uv: np.ndarray
+    xyz: np.ndarray
+    weight: float = 10.0
+    tol: float | None = None
+
+    def basis(self, ku, kv, p, q) -> "ScatteredBasis":
+        return ScatteredBasis.build(self.uv[:, 0], self.uv[:, 1], ku, kv, p, q)
+
+    def residuals(self, ku, kv, p, q, ctrl) -> np.ndarray:
+        """|S(uv_a) - xyz_a| (k,) for the control net (nu, nv, 3) on ku, kv."""
+        return np.linalg.norm(self.basis(ku, kv, p, q).evaluate(ctrl) - self.xyz, axis=1)
+
+
 #: the densest net the surface loop builds: one control point per this many data points
 DATA_PER_CTRL = 2.0
 #: weight of the bending energy per data point at that density (dimensionless: see `_penalty`)
@@ -342,13 +363,20 @@ def _penalty(smoothing: float, n_ctrl: int, n_data: int) -> float:
     return smoothing * min(1.0, DATA_PER_CTRL * n_ctrl / max(n_data, 1)) ** 2
 
 
-def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING):
+def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING, anchors=None):
     """Least-squares control net (nu, nv, 3) for scattered points (n, 3) at parameters (u, v), minimising
     sum |S(u_i, v_i) - P_i|^2 + n * w * (bending energy along u + along v) (see `_bending`), w the
-    `_penalty` of `smoothing`: a penalty on the surface, not on its net. Returns (ctrl, basis)."""
+    `_penalty` of `smoothing`: a penalty on the surface, not on its net. `anchors` (`Anchors`) add
+    sum weight |S(uv_a) - xyz_a|^2: points the surface is to pass through at fixed parameters (a penalty
+    constraint, such as a boundary curve shared with a neighbour, `rgm.fitters.patches`), not data.
+    Returns (ctrl, basis)."""
     basis = ScatteredBasis.build(np.asarray(u, float), np.asarray(v, float), ku, kv, p, q)
     nu, nv = basis.shape
     M, rhs = basis.normal_equations(points)
+    if anchors is not None:
+        A = anchors.basis(ku, kv, p, q).matrix()
+        M = M + anchors.weight * (A.T @ A)
+        rhs = rhs + anchors.weight * (A.T @ anchors.xyz)
     (iu, Ru), (iv, Rv) = _bending(ku, p, nu), _bending(kv, q, nv)
     w = len(points) * _penalty(smoothing, nu * nv, len(points))
     R = w * iu**3 / iv * sp.kron(Ru, sp.identity(nv)) + w * iv**3 / iu * sp.kron(sp.identity(nu), Rv)

@@ -159,24 +159,28 @@ def _inset(t: np.ndarray, margin: float) -> np.ndarray:
 
 
 def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statistic: str = "p95",
-                 max_ctrl: int = 40000, cuts: bool = True, params=None) -> FreeformShape:
+                 max_ctrl: int = 40000, cuts: bool = True, params=None, anchors=None) -> FreeformShape:
     """Fit a trimmed NURBS surface to a part's points (n, 3), or to a range grid (rows, cols, 3) with
     its valid mask. `tol` (model units) bounds `statistic` of the residuals. With `cuts`, planar boundary
     pieces become described plane intersections, when the intersection follows the data's edge and the
     control net stays within twice the data's size. `params` (u, v), each (n,) in [0, 1],
     are scattered points' own parameters (a projection onto a base surface, `rgm.fitters.patches`);
-    without them the points are projected onto their best-fit plane."""
+    without them the points are projected onto their best-fit plane. `anchors`
+    (`rgm.fitters.freeform.Anchors`, in the surface's parameters), scattered data only: points the
+    surface is pulled through by a weighted penalty (`rgm.fitters.freeform_surface.fit_surface`), such
+    as a boundary curve shared with a neighbouring patch."""
     if grid is not None:
         mask = np.isfinite(grid).all(axis=2) if mask is None else mask
         ug, vg = (_inset(t, 0.5 / (len(t) - 1)) for t in grid_parameters(np.where(mask[..., None], grid, 0.0), mask))
-        fit = fit_surface(grid, tol, mask=mask, params=(ug, vg), statistic=statistic, max_ctrl=max_ctrl)
+        fit = fit_surface(grid, tol, mask=mask, params=(ug, vg), statistic=statistic, max_ctrl=max_ctrl,
+                          anchors=anchors)
         region, rows, cols, snap = mask, ug, vg, None
         spacing = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=2)[mask[:, 1:] & mask[:, :-1]]))
     else:
         bins = int(np.clip(np.sqrt(len(points)) / 2, 24, 256))
         u, v = (_inset(np.asarray(t, float), 0.5 / bins)
                 for t in (plane_parameters(points)[:2] if params is None else params))
-        fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl)
+        fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl, anchors=anchors)
         region = _occupancy(u, v, bins)
         rows = cols = (np.arange(bins) + 0.5) / bins
         snap = np.c_[u, v]

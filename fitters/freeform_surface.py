@@ -74,9 +74,12 @@ class _SurfaceProblem:
     """The data of a surface fit and how to solve and measure it on given knot vectors: the separable
     solve for a full grid, the sparse normal equations otherwise. Residuals are per data point."""
 
-    def __init__(self, points, mask, params, degree, smoothing, statistic):
+    def __init__(self, points, mask, params, degree, smoothing, statistic, anchors=None):
         pts = np.asarray(points, float)
         self.degree, self.smoothing, self.statistic, self.grid = degree, smoothing, statistic, None
+        self.anchors = anchors
+        if anchors is not None and pts.ndim == 3:
+            raise GeometryError("anchor points need scattered data (a grid is solved separably)")
         if pts.ndim == 3:
             valid = np.isfinite(pts).all(axis=2)
             mask = valid if mask is None else (np.asarray(mask, bool) & valid)
@@ -101,13 +104,20 @@ class _SurfaceProblem:
             self.lines = None
             self.char = (None, None)
 
+    def anchors_met(self, ku, kv, ctrl) -> bool:
+        """Whether the anchors (if refined for: `Anchors.tol`) are within their tolerance at p95."""
+        a = self.anchors
+        if a is None or a.tol is None:
+            return True
+        return float(np.percentile(a.residuals(ku, kv, self.degree, self.degree, ctrl), 95)) <= a.tol
+
     def solve(self, ku, kv, tol):
         """Control net (nu, nv, 3) and residuals (n,) on the knot vectors ku, kv (`residuals`)."""
         p = self.degree
         if self.grid is not None:
             ctrl = solve_grid(self.ug, self.vg, self.grid, ku, kv, p, p, self.smoothing)[0]
         else:
-            ctrl = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing)[0]
+            ctrl = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing, self.anchors)[0]
         return ctrl, self.residuals(ku, kv, ctrl, tol)
 
     def residuals(self, ku, kv, ctrl, tol):
@@ -186,7 +196,7 @@ class _SurfaceProblem:
 def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
                 n_initial: int | None = None, max_ctrl: int = 40000, statistic: str = "max",
                 smoothing: float = SMOOTHING, prune: int = 8, min_lines: float = 1.0,
-                data_per_ctrl: float = DATA_PER_CTRL) -> SurfaceFit:
+                data_per_ctrl: float = DATA_PER_CTRL, anchors=None) -> SurfaceFit:
     """Least-squares bicubic (by default) B-spline surface of `points` refined by knot insertion.
 
     points: (n, 3) scattered points, or a grid (rows, cols, 3) with optional `mask` (rows, cols) of valid
@@ -196,6 +206,11 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
         a maximum meaningless) of the parametric residuals.
     smoothing: the weight per data point of the surface's bending energy at the approximation limit
         (`rgm.fitters.freeform.solve_scattered`: coarser nets get less).
+    anchors: optional `rgm.fitters.freeform.Anchors` for scattered data: points the surface is pulled
+        through at fixed parameters by a weighted penalty in every solve (`solve_scattered`); they are
+        not data, and the residuals and the certificate are the data's alone. With `Anchors.tol`, the
+        spans whose anchors are missed by more are refined too (within the same limits), and the
+        refinement goes on until both hold; the bisection and the pruning keep both.
     Refinement stops when the statistic is met; when every span that exceeds the tolerance holds fewer
     than 2 `min_lines` data lines, or the net would exceed one control point per `data_per_ctrl` data
     points (see the module docstring); or when the net would exceed `max_ctrl` (the last step then
@@ -205,23 +220,28 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
     knots whose neighbourhood is far inside the tolerance are removed in one batch, and up to `prune`
     single knots, quietest first, each only when the fit still holds without it.
     """
-    prob = _SurfaceProblem(points, mask, params, degree, smoothing, statistic)
+    prob = _SurfaceProblem(points, mask, params, degree, smoothing, statistic, anchors)
     limit = max((degree + 1) ** 2, int(len(prob.data) / data_per_ctrl))
     ku = kv = uniform_knots(degree, n_initial or initial_net_size(*prob.char, degree, len(prob.data)))
     prev, history, stopped, step, final = None, [], "", None, ""
     while True:
         ctrl, res = prob.solve(ku, kv, tol)
         value = statistic_value(res, statistic)
-        if prev is not None and value > prev[3]:  # keep the refined previous shape
+        if prev is not None and value > prev[3] and prob.anchors is None:  # keep the refined previous shape
             ctrl = np.einsum("ia,abd,jb->ijd", refinement_matrix(prev[1], ku, degree), prev[0],
                              refinement_matrix(prev[2], kv, degree), optimize=True)
             res = prob.residuals(ku, kv, ctrl, tol)
             value = statistic_value(res, statistic)
         history.append((ctrl.shape[0] * ctrl.shape[1], value))
-        if value <= tol or final:
+        met = prob.anchors_met(ku, kv, ctrl)
+        if (value <= tol and met) or final:
             stopped = "" if value <= tol else final
             break
         pu, wu, pv, wv = prob.worst_per_direction(res)
+        if not met:   # the anchors' spans too, their residuals scaled to the data's tolerance
+            a = prob.anchors
+            excess = a.residuals(ku, kv, degree, degree, ctrl) * (tol / a.tol)
+            pu, wu, pv, wv = np.r_[pu, a.uv[:, 0]], np.r_[wu, excess], np.r_[pv, a.uv[:, 1]], np.r_[wv, excess]
         greed = 0.5 if value > 4 * tol else 0.8  # near the goal, split only the worst spans
         lines = min_lines * prob.per_line()
         step = (_split_candidates(pu, wu, ku, degree, tol, lines, greed),
@@ -260,7 +280,7 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
             kv2 = np.sort(np.r_[prev[2], cv[take[take >= len(cu)] - len(cu)]])
             ctrl2, res2 = prob.solve(ku2, kv2, tol)
             value2 = statistic_value(res2, statistic)
-            if value2 <= tol:
+            if value2 <= tol and prob.anchors_met(ku2, kv2, ctrl2):
                 hi = mid
                 ku, kv, ctrl, res, value = ku2, kv2, ctrl2, res2, value2
             else:
@@ -328,7 +348,7 @@ def _prune(prob, ku, kv, ctrl, res, tol, statistic, attempts, slack=0.4):
             tried.add((i < len(bu), float(bu[i] if i < len(bu) else bv[i - len(bu)])))
         ku2, kv2 = _without(ku, prob.degree, drop_u), _without(kv, prob.degree, drop_v)
         ctrl2, res2 = prob.solve(ku2, kv2, tol)
-        if statistic_value(res2, statistic) <= tol:
+        if statistic_value(res2, statistic) <= tol and prob.anchors_met(ku2, kv2, ctrl2):
             ku, kv, ctrl, res = ku2, kv2, ctrl2, res2
     return ku, kv, ctrl, res
 

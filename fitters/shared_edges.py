@@ -39,6 +39,10 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    (`rgm.fitters.freeform_measure.branch_between`, as `TrimmedNurbs` takes it); the points of face i's
    edge S_i(uv_i) are measured to face j's edge S_j(uv_j) (a dense polyline on surface j: never closer
    than surface j itself), and the other way. A pair whose measured gap exceeds the tolerance keeps its separate trims.
+
+Seams left over the tolerance are handled by `rgm.fitters.patches`: their patches are refitted through a
+common boundary curve (anchors) and shared again here; a `cache` keeps each pair's candidate per pair of
+fits, so that pairs whose patches were not refitted are not intersected again.
 """
 from __future__ import annotations
 
@@ -372,11 +376,13 @@ def _to_polyline(points, polyline) -> np.ndarray:
     return best
 
 
-def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: float) -> list:
+def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: float, cache=None) -> list:
     """Make neighbouring patches share their boundary: for each seam in `gaps` (separate-trim Gaps from
     `g0_gaps`), the intersection of both surfaces in both loops where it can be (module docstring),
     patches[k].shape replaced accordingly. Returns the Gaps: shared ones measured on the shared edge
-    (`before`: the separate trims' figure), the others as they were, with the reason."""
+    (`before`: the separate trims' figure), the others as they were, with the reason. `cache` (a dict,
+    kept by the caller between calls on the same points) holds each pair's candidate edges or reasons with
+    the two fits they came from: a pair of fits already seen is not intersected again."""
     from rgm.fitters.freeform_part import FreeformShape, _surface_speed
 
     label = np.full(len(points), -1)
@@ -390,7 +396,12 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
     shapes = [p.shape for p in patches]
     why, cands = {}, {}
     for g in gaps:
-        c = _candidate(g.i, g.j, shapes, loops, tol, near, spacing)
+        fits = (shapes[g.i].fit, shapes[g.j].fit)
+        seen = [] if cache is None else cache.setdefault((g.i, g.j), [])
+        c = next((c for a, b, c in seen if a is fits[0] and b is fits[1]), None)
+        if c is None:
+            c = _candidate(g.i, g.j, shapes, loops, tol, near, spacing)
+            seen.append((*fits, c))
         if isinstance(c, str):
             why[(g.i, g.j)] = c
         else:

@@ -211,14 +211,17 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     gaps = np.array([g.max for g in result.gaps])
     assert len(gaps) >= len(result) - 1 and np.all(np.isfinite(gaps))
     # the bottom, shoulder and cap creases are shared where the surfaces cross (each reaches past its data,
-    # so no domain edge clamps the intersection): within the tolerance along the edge, several times closer
-    # than the separate trims were; every pair not shared says why. Patches of a seam still over 1 mm are
-    # fitted again at 0.5 mm: 16 of the 21 seams are then within the tolerance (7 of 18 before either)
+    # so no domain edge clamps the intersection): within the tolerance along the edge; every pair not
+    # shared says why. The patches of the seams still over 1 mm (9 of 21) are fitted again at 0.5 mm, those
+    # without a shared edge through their common boundary curves (the midpoints between the two surfaces
+    # along both faces' trims) as anchors: 20 of the 21 seams are then within the tolerance, worst 1.23 mm
+    # (the wrap halves 1-2, whose patches share edges and so are refitted without anchors; 16 with a
+    # plain refit at 0.5 mm, worst 1.48 mm; 7 of 18 before the surfaces reached past their data)
     shared = [g for g in result.gaps if g.shared]
-    assert len(shared) >= 6 and all(g.max <= 1.0 for g in shared)
+    assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
     within = sum(g.max <= 1.0 for g in result.gaps)
-    assert within >= 16 and gaps.max() < 1.6
-    assert max(g.max for g in shared) < 0.5 * min(g.before for g in shared)
+    assert within >= 20 and gaps.max() < 1.3
+    assert max(g.max for g in shared) < min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
     for g in shared:   # one binding, used by both faces' loops
         crease = f"crease_{g.i + 1}_{g.j + 1}"
@@ -245,8 +248,13 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     assert all(s.fit.stats.holds and s.fit.stats.p95 <= 1.0 for s in result.shapes)
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
-    # 19 of 41 seams within 1 mm (6 of 32 before the surfaces reached past their data)
-    assert sum(g.max <= 1.0 for g in result.gaps) >= 19
+    # 24 of 42 seams within 1 mm once the patches of the loose seams are refitted through common boundary
+    # curves (20 with a plain refit at 0.5 mm, 6 of 32 before the surfaces reached past their data); the
+    # worst seam 5.75 mm (5.13 mm: a short corner seam, 1-7)
+    gaps = [g.max for g in result.gaps]
+    print(f"meat can: {len(shared)} of {len(gaps)} seams shared, {sum(g <= 1.0 for g in gaps)} within 1 mm, "
+          f"worst {max(gaps):.2f} mm, ctrl {[s.fit.n_ctrl for s in result.shapes]}")
+    assert sum(g <= 1.0 for g in gaps) >= 24 and max(gaps) < 6.0
     assert all(g.why for g in result.gaps if not g.shared)
     text, _ = patches_text(result, 1.0, title="meat can")
     model = rgm.loads(text)
@@ -255,3 +263,25 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
         from rgm.backends.occ import write_step
 
         write_step(model, tmp_path / "meat_can.step", tol=1.0)
+
+
+def test_anchors_pull_a_surface_through_a_curve_and_the_data_keep_their_certificate():
+    """`Anchors`: points a fitted surface passes through at fixed parameters (a weighted penalty), not
+    data: the refinement inserts knots until they are met within their tolerance, and the certificate
+    is measured on the data alone."""
+    from rgm.fitters.freeform import Anchors
+    from rgm.fitters.freeform_part import fit_freeform
+
+    rng = np.random.default_rng(3)
+    p = np.c_[rng.uniform(0, 50, (3000, 2)), rng.normal(0, 0.02, 3000)]   # a noisy plane z = 0
+    u, v = p[:, 0] / 50, p[:, 1] / 50
+    t = np.linspace(0.05, 0.95, 200)
+    uv = np.c_[np.full_like(t, 0.1), t]                                  # along one edge, lifted 0.3 mm
+    lifted = np.c_[50 * uv, np.full(len(t), 0.3)]
+    plain = fit_freeform(p, 0.2, params=(u, v), cuts=False)
+    pulled = fit_freeform(p, 0.2, params=(u, v), cuts=False, anchors=Anchors(uv, lifted, 10.0, 0.03))
+    assert pulled.fit.stats.holds and pulled.fit.stats.p95 <= 0.2
+    on = pulled.nurbs().evaluate(uv[:, 0], uv[:, 1])
+    assert np.percentile(np.linalg.norm(on - lifted, axis=1), 95) <= 0.03
+    assert np.abs(plain.nurbs().evaluate(uv[:, 0], uv[:, 1])[:, 2]).max() < 0.1   # without: the plane
+    assert pulled.fit.n_ctrl > plain.fit.n_ctrl          # knots were inserted for the anchors
