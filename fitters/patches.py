@@ -45,9 +45,9 @@ merged views of a closed or wrapped part:
    (toward a fixed neighbour: onto its surface). Both surfaces then pass through one curve along the
    seam (a band where they meet nearly tangentially). The refit is at half the tolerance (each surface
    nearer the crease data both approximate), at the tolerance where that does not hold; every patch
-   still meets its own certificate. The set is shared and measured again (only the seams shared before
-   are intersected again: surfaces pulled together along a band meet ill-conditioned, and exact
-   intersectors find other branches there; the others keep separate trims, measured); each
+   still meets its own certificate. The set is shared and measured again (the seams shared before and
+   those still over the tolerance are intersected again; a seam brought within it keeps separate trims,
+   measured: intersections are most of the cost, and surfaces pulled together meet ill-conditioned); each
    group of patches linked by loose seams keeps its refit only if its seams do better, and the set is
    kept if it brings more seams within the tolerance. A patch with a shared edge is refitted without
    anchors (pulled along a band at its other seams, its re-intersected edge came out where
@@ -406,9 +406,9 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     cache = {}
 
     def share(fits, before):
-        # intersected again: only the seams shared before. The others were pulled together along a band
-        # by their anchors, where an intersection is ill-conditioned (exact intersectors find other
-        # branches, OpenCASCADE refused such faces): they keep their separate trims, measured
+        # intersected again: the seams shared before and those still over the tolerance; a seam the refit
+        # brought within it keeps its separate trims, measured (intersections are most of the cost, and
+        # surfaces pulled together along a band meet ill-conditioned)
         copy = [PatchFit(q.indices, q.base, q.shape, q.seconds, q.params) for q in fits]
         was = {(g.i, g.j) for g in before if g.shared}
         measured = g0_gaps(points, fits, near)
