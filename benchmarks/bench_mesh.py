@@ -73,10 +73,29 @@ def lattice(steps=6):
 
 
 def deviation(obj, vertices, triangles) -> float:
-    """Max distance of lattice samples of every triangle to the closest of the object's exact patches."""
+    """Max distance of lattice samples of every triangle to the closest of the object's exact patches.
+    Each patch measures only the samples inside its box (from a 33 x 33 grid of its points) grown by 2 %
+    of the model size; a sample farther than that from every patch it was measured against is measured
+    against all of them, so the figure is the same as measuring every sample against every patch."""
     pts = np.einsum("sk,tkd->tsd", lattice(), vertices[triangles]).reshape(-1, 3)
     patches = [f.patch for f in collect_faces([obj], tol=None)]
-    return float(np.min([p.closest(pts)[1] for p in patches], axis=0).max())
+    boxes = []
+    for p in patches:
+        (u0, u1), (v0, v1) = p.domain
+        uu, vv = np.meshgrid(np.linspace(u0, u1, 33), np.linspace(v0, v1, 33), indexing="ij")
+        q = p.evaluate(uu.ravel(), vv.ravel())
+        boxes.append((q.min(axis=0), q.max(axis=0)))
+    size = float(np.linalg.norm(np.max([b[1] for b in boxes], axis=0) - np.min([b[0] for b in boxes], axis=0)))
+    margin = 0.02 * size
+    best = np.full(len(pts), np.inf)
+    for p, (lo, hi) in zip(patches, boxes):
+        near = np.flatnonzero(((pts >= lo - margin) & (pts <= hi + margin)).all(axis=1))
+        if len(near):
+            best[near] = np.minimum(best[near], p.closest(pts[near])[1])
+    far = np.flatnonzero(best > margin)
+    if len(far):
+        best[far] = np.min([p.closest(pts[far])[1] for p in patches], axis=0)
+    return float(best.max())
 
 
 def occ_mesh(obj, tol):
