@@ -415,7 +415,7 @@ def read_iges(text: str, source: str | None = None) -> IgesImport:
         objects = {k: v.transform(m) for k, v in objects.items()}
         units, reader.tol = "mm", reader.tol * _TO_MM[units]
     notes = []
-    gap = _loop_gap(objects.values())
+    gap = _loop_gap(objects.values(), reader.tol)
     if gap > reader.tol:
         notes.append(f"model-space trimming curves lie up to {gap:.3g} from their surfaces, more than the "
                      f"file's resolution {reader.tol:g}; the model tolerance is set to {2 * gap:.3g}")
@@ -425,30 +425,26 @@ def read_iges(text: str, source: str | None = None) -> IgesImport:
                       [reader.problems[k] for k in sorted(reader.problems)], notes)
 
 
-def _loop_gap(objects) -> float:
-    """Largest distance (model units) from a model-space loop piece to its face's surface (65 samples
-    per piece), over the trimmed faces among `objects` (shells included). The samples lie on or near
-    the surface, so the mesher's closest points (nearest nodes of a 33 x 33 parameter grid, then
-    Gauss-Newton: `rgm.backends.mesh_surface.Patch.closest`) find the global minimum, at a few ms a
-    face (the general inversion, for points anywhere, took 80 ms: seconds on a part of many faces)."""
-    from .mesh_surface import NurbsPatch
+def _loop_gap(objects, tol: float) -> float:
+    """Largest distance (model units) from a model-space loop piece to its face's surface, over the
+    trimmed faces among `objects` (shells included), exact where it exceeds `tol` (the model's check,
+    `rgm.model.validate.distances_to_surface`: a local bound, the global search only past `tol`)."""
+    from rgm.model.validate import distances_to_surface
 
     gap = 0.0
     for obj in objects:
         for face in obj.faces if isinstance(obj, Shell) else [obj]:
             if not isinstance(face, TrimmedFace) or isinstance(face.surface, Plane):
                 continue
-            pts = []
+            curves = []
             for piece in (p for loop in face.loops() for p in loop.pieces if p.dim == 3):
                 for p in piece.pieces if isinstance(piece, CompositeCurve) else (piece,):
                     try:
-                        c = p.nurbs()
-                        pts.append(c.evaluate(np.linspace(*c.domain, 65)))
+                        curves.append(p.nurbs())
                     except _DATA_ERRORS:  # a degenerate piece: the compiler's checks will name it
                         continue
             try:
-                if pts:
-                    gap = max(gap, float(NurbsPatch(face.surface.nurbs()).closest(np.concatenate(pts), grid=32)[1].max()))
+                gap = max([gap] + [float(d.max()) for d in distances_to_surface(face.surface, curves, tol)])
             except _DATA_ERRORS:
                 continue
     return gap

@@ -76,7 +76,6 @@ __all__ = ["crease_mask", "split_scattered", "base_parameters", "reach_past", "B
            "PatchSet", "fit_patches", "seam_anchors", "boundary_samples", "g0_gaps"]
 
 _ANCHOR_WEIGHT = 10.0   # weight of a seam anchor relative to a data point's (`seam_anchors`)
-_ROUNDS = 1             # refits with seam anchors (`fit_patches`)
 _GROWTH = 4             # a refitted net has at most this many times the control points (`fit_patches`)
 _FIRST = 0.5            # the first refit is at this share of the tolerance (`fit_patches`)
 _WITHIN = ("refitted through a common boundary curve with its neighbour: the separate trims are measured (surfaces "
@@ -391,13 +390,13 @@ def _score(gaps, tol):
 
 
 def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
-    """Share the boundaries (`rgm.fitters.shared_edges.share_boundaries`); then, up to `_ROUNDS` times,
-    refit the patches of the seams still over `tol` with their common boundary curves as anchors
-    (`seam_anchors`), the first time at tol / 2 (each surface then nearer the crease's data that both
-    approximate, so nearer each other, or crossing where they did not), then at their own tolerance. The
-    refitted set is shared and measured again; each group of patches linked by seams over `tol` keeps
-    its refit only if the seams it touches score better (`_score`), and the whole set is kept when it
-    scores better. Returns (patches with their shared loops, gaps)."""
+    """Share the boundaries (`rgm.fitters.shared_edges.share_boundaries`); then refit the patches of the
+    seams still over `tol` with their common boundary curves as anchors (`seam_anchors`), at tol / 2
+    where that holds (each surface then nearer the crease's data that both approximate, so nearer each
+    other, or crossing where they did not), else at `tol`. The refitted set is shared and measured
+    again; each group of patches linked by seams over `tol` keeps its refit only if the seams it
+    touches score better (`_score`), and the whole set is kept when it scores better. Returns (patches
+    with their shared loops, gaps)."""
     from scipy.sparse.csgraph import connected_components
 
     from rgm.fitters.shared_edges import share_boundaries
@@ -417,54 +416,51 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
         return [done.get((g.i, g.j)) or replace(g, why=_WITHIN) for g in measured], copy
 
     plain = [PatchFit(q.indices, q.base, q.shape, q.seconds, q.params) for q in patches]
-    best = (plain, share_boundaries(points, patches, gaps, tol, near, spacing, cache), patches, [tol] * len(plain))
-    for round_ in range(_ROUNDS):
-        plain, old_gaps, _, tols = best
-        over = [(g.i, g.j) for g in old_gaps if g.max > tol]
-        if not over:
-            break
-        loose = sorted({r for pair in over for r in pair})
-        # a patch with a shared edge is refitted without anchors: pulled along a band at its other seams, its
-        # re-intersected edge came out where OpenCASCADE's exact intersection would not close its face
-        sharing = {r for g in old_gaps if g.shared for r in (g.i, g.j)}
-        anchors = seam_anchors(points, plain, old_gaps, loose, near, spacing, _ANCHOR_TOL * tol)
-        anchors = {r: a for r, a in anchors.items() if r not in sharing}
-        again, tols = list(plain), list(tols)
-        for r in loose:
-            q = plain[r]
-            for at in sorted({tols[r] if round_ else _FIRST * tol, tol}):   # tighter first, the tolerance if not
-                # the net may grow to meet the anchors, to _GROWTH times its size (no net as dense as the
-                # data, wiggling between anchors it cannot all meet)
-                cap = min(max_ctrl, max(_GROWTH * q.shape.fit.n_ctrl, 100))
-                try:
-                    fit = _fit_patch(points, q.indices, q.base, q.params, at, statistic, cap, anchors.get(r))
-                except GeometryError:
-                    continue
-                if fit.shape.fit.stats.holds:
-                    again[r], tols[r] = fit, at
-                    break
-        if all(a is b for a, b in zip(again, plain)):
-            break
-        new_gaps, shared = share(again, old_gaps)
-        # each group of patches linked by seams over the tolerance keeps its refit if its seams do better
-        pairs = np.array(over).T
-        group = connected_components(coo_matrix((np.ones(len(over)), pairs), shape=(len(plain),) * 2),
-                                     directed=False)[1]
-        keep = list(again)
-        for c in np.unique(group[loose]):
-            mine = set(np.nonzero(group == c)[0])
-            touch = [k for k, g in enumerate(old_gaps) if g.i in mine or g.j in mine]
-            if _score([new_gaps[k] for k in touch], tol) <= _score([old_gaps[k] for k in touch], tol):
-                for r in mine:
-                    keep[r], tols[r] = plain[r], best[3][r]
-        if any(a is not b for a, b in zip(keep, again)):
-            if all(a is b for a, b in zip(keep, plain)):
+    old_gaps = share_boundaries(points, patches, gaps, tol, near, spacing, cache)   # shares into `patches`
+    over = [(g.i, g.j) for g in old_gaps if g.max > tol]
+    if not over:
+        return patches, old_gaps
+    loose = sorted({r for pair in over for r in pair})
+    # a patch with a shared edge is refitted without anchors: pulled along a band at its other seams, its
+    # re-intersected edge came out where OpenCASCADE's exact intersection would not close its face
+    sharing = {r for g in old_gaps if g.shared for r in (g.i, g.j)}
+    anchors = seam_anchors(points, plain, old_gaps, loose, near, spacing, _ANCHOR_TOL * tol)
+    anchors = {r: a for r, a in anchors.items() if r not in sharing}
+    again = list(plain)
+    for r in loose:
+        q = plain[r]
+        # the net may grow to meet the anchors, to _GROWTH times its size (no net as dense as the data,
+        # wiggling between anchors it cannot all meet)
+        cap = min(max_ctrl, max(_GROWTH * q.shape.fit.n_ctrl, 100))
+        for at in (_FIRST * tol, tol):   # tighter first, the tolerance if not
+            try:
+                fit = _fit_patch(points, q.indices, q.base, q.params, at, statistic, cap, anchors.get(r))
+            except GeometryError:
+                continue
+            if fit.shape.fit.stats.holds:
+                again[r] = fit
                 break
-            new_gaps, shared = share(keep, old_gaps)
-        if _score(new_gaps, tol) <= _score(old_gaps, tol):
-            break
-        best = (keep, new_gaps, shared, tols)
-    return best[2], best[1]
+    if all(a is b for a, b in zip(again, plain)):
+        return patches, old_gaps
+    new_gaps, shared = share(again, old_gaps)
+    # each group of patches linked by seams over the tolerance keeps its refit if its seams do better
+    pairs = np.array(over).T
+    group = connected_components(coo_matrix((np.ones(len(over)), pairs), shape=(len(plain),) * 2),
+                                 directed=False)[1]
+    keep = list(again)
+    for c in np.unique(group[loose]):
+        mine = set(np.nonzero(group == c)[0])
+        touch = [k for k, g in enumerate(old_gaps) if g.i in mine or g.j in mine]
+        if _score([new_gaps[k] for k in touch], tol) <= _score([old_gaps[k] for k in touch], tol):
+            for r in mine:
+                keep[r] = plain[r]
+    if any(a is not b for a, b in zip(keep, again)):
+        if all(a is b for a, b in zip(keep, plain)):
+            return patches, old_gaps
+        new_gaps, shared = share(keep, old_gaps)
+    if _score(new_gaps, tol) <= _score(old_gaps, tol):
+        return patches, old_gaps
+    return shared, new_gaps
 
 
 def seam_anchors(points, patches: list[PatchFit], gaps: list[Gap], refit, near: float, spacing: float,

@@ -304,27 +304,33 @@ def _inside_domain(surface, piece, i: int, tol: float, lp) -> Diagnostic | None:
 
 def _distances_3d(surface, pieces, tol: float) -> dict:
     """{i: distances (_SAMPLES,) of piece i's samples to the surface} for the model-space (3-D) pieces
-    of a loop (pieces whose surface has no NURBS form are left out). All the loop's samples are
-    bounded in one local search (`distance_bound_surface`); only those it does not find within the
-    tolerance get the global search, so the figure reported for a piece off the surface is exact."""
+    of a loop (`distances_to_surface`; {} when the surface has no NURBS form)."""
     curves = {i: p.nurbs() for i, p in enumerate(pieces) if p.dim == 3}
-    pts = {i: c.evaluate(np.linspace(*c.domain, _SAMPLES)) for i, c in curves.items()}
-    if not pts:
-        return {}
-    if isinstance(surface, O.Plane):
-        return {i: np.abs(surface.signed_distance(x)) for i, x in pts.items()}
-    from rgm.geometry.inversion import distance_bound_surface
-
     try:
-        nurbs = surface.nurbs()
-        every = np.concatenate(list(pts.values()))
-        dist = distance_bound_surface(nurbs, every)
-        far = dist > tol
-        if far.any():
-            dist[far] = nurbs.closest_point(every[far])[3]
+        return dict(zip(curves, distances_to_surface(surface, list(curves.values()), tol)))
     except GeometryError:
         return {}
-    return dict(zip(pts, np.split(dist, np.cumsum([len(x) for x in pts.values()])[:-1])))
+
+
+def distances_to_surface(surface, curves, tol: float) -> list:
+    """[distances (_SAMPLES,)] of each 3-D NurbsCurve's samples to `surface` (model units), exact where
+    they exceed `tol`. All the samples are bounded in one local search (`distance_bound_surface`);
+    only those it does not find within `tol` get the global search, so a curve off the surface is
+    reported with its exact distance. Used for the trimming loops of a model and of an IGES import."""
+    pts = [c.evaluate(np.linspace(*c.domain, _SAMPLES)) for c in curves]
+    if not pts:
+        return []
+    if isinstance(surface, O.Plane):
+        return [np.abs(surface.signed_distance(x)) for x in pts]
+    from rgm.geometry.inversion import distance_bound_surface
+
+    nurbs = surface.nurbs()
+    every = np.concatenate(pts)
+    dist = distance_bound_surface(nurbs, every)
+    far = dist > tol
+    if far.any():
+        dist[far] = nurbs.closest_point(every[far])[3]
+    return np.split(dist, np.cumsum([len(x) for x in pts])[:-1])
 
 
 def _lies_on(dist, i: int, tol: float, lp) -> Diagnostic | None:
