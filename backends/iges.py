@@ -40,6 +40,7 @@ from rgm.model import (
     BSplineCurve, BSplineSurface, Circle, CircularArc, CompositeCurve, Extrusion, IntersectionCurve, Line, Loop,
     Plane, Polyline, Revolution, RuledSurface, Shell, TrimmedFace,
 )
+from rgm.model.validate import loop_stretches
 
 from .iges_brep import NotClosed, write_msbo
 from .iges_curves import arc_placement, model_curve, parameter_curve
@@ -267,8 +268,12 @@ class _Lowering:
         """142: CRTN, SPTR, BPTR (2-D curve or 102 of them), CPTR (3-D), PREF."""
         uv, xyz, kinds, near = [], [], [], None
         # a composite piece's members are pieces of their own: each arc keeps its exact form (`_piece`)
-        for piece in (m for p in loop.pieces for m in (_flatten(p) if isinstance(p, CompositeCurve) else [p])):
+        stretches = loop_stretches(loop, surface, self.tol)
+        pieces = [(k, m) for k, p in enumerate(loop.pieces)
+                  for m in (_flatten(p) if isinstance(p, CompositeCurve) else [p])]
+        for k, piece in pieces:
             b, c, crtn = self._loop_piece(piece, surface, near)
+            b, c = stretches.get(k, (b, c))
             near = np.asarray(b.end, float)
             uv.append(self._piece(b, 2))
             xyz.append(self._piece(c, 3))

@@ -9,7 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from rgm.errors import BackendError
+from rgm.geometry import NurbsCurve
 from rgm.model import CompositeCurve, Curve, IntersectionCurve, Plane, Shell, Surface, TrimmedFace
+from rgm.model.validate import loop_stretches
 
 from .iges_curves import surface_points
 from .iges_read import read_iges_file
@@ -22,7 +24,8 @@ _MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 def _curve_points(curve, tol, surface=None, count: int = 17) -> np.ndarray:
     if isinstance(curve, CompositeCurve):  # piece by piece (the joined form may be reparametrised)
         return np.concatenate([_curve_points(p, tol, surface, count) for p in curve.pieces])
-    nurbs = curve.nurbs(tol) if isinstance(curve, IntersectionCurve) else curve.nurbs()
+    nurbs = curve if isinstance(curve, NurbsCurve) else curve.nurbs(tol) if isinstance(curve, IntersectionCurve) \
+        else curve.nurbs()
     t = np.linspace(*nurbs.domain, count)
     p = nurbs.evaluate(t)
     if p.shape[1] == 2:
@@ -37,8 +40,10 @@ def sample_object(obj, tol: float, count: int = 9) -> np.ndarray:
         return np.concatenate([sample_object(f, tol, count) for f in obj.faces])
     if isinstance(obj, TrimmedFace):
         parts = [sample_object(obj.surface, tol, count)]
-        for loop in obj.loops():
-            parts += [_curve_points(p, tol, obj.surface) for p in loop.pieces]
+        for loop in obj.loops():   # an intersection piece as the loop takes it (`loop_stretches`)
+            stretches = loop_stretches(loop, obj.surface, tol)
+            parts += [_curve_points(stretches[k][1] if k in stretches else p, tol, obj.surface)
+                      for k, p in enumerate(loop.pieces)]
         return np.concatenate(parts)
     if isinstance(obj, Plane):
         g = np.linspace(-1.0, 1.0, count)

@@ -450,8 +450,9 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     keep = list(again)
     for c in np.unique(group[loose]):
         mine = set(np.nonzero(group == c)[0])
-        touch = [k for k, g in enumerate(old_gaps) if g.i in mine or g.j in mine]
-        if _score([new_gaps[k] for k in touch], tol) <= _score([old_gaps[k] for k in touch], tol):
+        touches = lambda gaps: [g for g in gaps if g.i in mine or g.j in mine]   # noqa: E731
+        # the refit may add or lose a seam: each set is scored on its own seams of the group
+        if _score(touches(new_gaps), tol) <= _score(touches(old_gaps), tol):
             for r in mine:
                 keep[r] = plain[r]
     if any(a is not b for a, b in zip(keep, again)):

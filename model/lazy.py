@@ -73,6 +73,33 @@ class IntersectionCurve(Curve):
             return [br.uv_b for br in self.approximate(tol)]
         raise GeometryError(f"the intersection{_of(self)} does not lie on that surface (not one of its operands)")
 
+    def stretch(self, surface, start, end, tol: float | None = None):
+        """(uv, curve): the stretch of the branch passing nearest to `start` and `end` (3-D points: a
+        loop's previous piece's end and next piece's start) from the point nearest `start` to the one
+        nearest `end`, as 2-D NurbsCurve on `surface` (operand a or b) and 3-D NurbsCurve, sharing their
+        parameter. A marched branch has no preferred direction: this is how a loop takes an intersection
+        piece between two curves (`rgm.model.validate`, the back ends)."""
+        ends = np.array([start, end], float)
+        best = None
+        for br, uv in zip(self.approximate(tol), self.uv_curves(surface, tol)):
+            t, _, dist = br.curve.closest_point(ends)
+            if best is None or dist.sum() < best[0]:
+                best = (dist.sum(), t, uv, br.curve)
+        if best is None:
+            raise GeometryError(f"the intersection{_of(self)} is empty")
+        (ta, tb), uv, curve = best[1], best[2], best[3]
+        lo, hi = curve.domain
+        eps = 1e-12 * (hi - lo)
+        a, b = min(ta, tb), max(ta, tb)
+        if b - a <= eps:
+            raise GeometryError(f"the intersection{_of(self)} meets both neighbouring pieces at one point")
+        cut = []
+        for c in (uv, curve):
+            c = c.split(b)[0] if b < hi - eps else c
+            c = c.split(a)[1] if a > lo + eps else c
+            cut.append(c.reverse() if ta > tb else c)
+        return cut[0], cut[1]
+
     def transform(self, matrix, memo: dict | None = None):
         """A new lazy intersection of the transformed operands (`memo` keeps operand identity)."""
         memo = {} if memo is None else memo

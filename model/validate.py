@@ -76,7 +76,7 @@ def _lazy_loop(face, lp, tol: float, gap_tol: float, out: list) -> None:
     ends, free = [], []
     for i, piece in enumerate(pieces):
         if not lazy[i]:
-            ends.append(_ends3(face.surface, piece))
+            ends.append(piece_ends(face.surface, piece))
             free.append(False)
             continue
         if face.surface is not piece.a and face.surface is not piece.b:
@@ -93,8 +93,13 @@ def _lazy_loop(face, lp, tol: float, gap_tol: float, out: list) -> None:
         if between and branches:
             # between two curves the piece is the stretch of the branch from the previous piece's end to
             # the next one's start, as the back ends take it (of the branch passing nearest to both)
-            ends.append(_stretch(branches, _ends3(face.surface, pieces[i - 1])[1],
-                                 _ends3(face.surface, pieces[(i + 1) % k])[0]))
+            try:
+                _, c = piece.stretch(face.surface, piece_ends(face.surface, pieces[i - 1])[1],
+                                     piece_ends(face.surface, pieces[(i + 1) % k])[0], tol)
+            except GeometryError as exc:
+                out.append(error("E0508", f"loop piece {i + 1}: {exc}", _span(piece, lp), "cannot be approximated"))
+                return
+            ends.append((c.start, c.end))
             free.append(True)
             continue
         if len(branches) != 1:
@@ -108,27 +113,17 @@ def _lazy_loop(face, lp, tol: float, gap_tol: float, out: list) -> None:
     _chain(face, lp, ends, free, gap_tol, out)
 
 
-def _stretch(branches, start, end) -> tuple:
-    """The points of the branch passing nearest to `start` and `end` (3-D) nearest to each (dense
-    samples, each refined on the polyline's segments beside it)."""
-    best = None
-    for br in branches:
-        pts = br.curve.evaluate(np.linspace(*br.curve.domain, 4097))
-        near = [_nearest_on_polyline(pts, q) for q in (start, end)]
-        err = sum(np.linalg.norm(p - q) for p, q in zip(near, (start, end)))
-        if best is None or err < best[0]:
-            best = (err, tuple(near))
-    return best[1]
-
-
-def _nearest_on_polyline(pts, q) -> np.ndarray:
-    k = int(np.argmin(np.linalg.norm(pts - q, axis=1)))
-    cands = [pts[k]]
-    for a, b in ((pts[max(k - 1, 0)], pts[k]), (pts[k], pts[min(k + 1, len(pts) - 1)])):
-        ab = b - a
-        if ab @ ab > 0:
-            cands.append(a + np.clip((q - a) @ ab / (ab @ ab), 0, 1) * ab)
-    return min(cands, key=lambda p: np.linalg.norm(p - q))
+def loop_stretches(loop, surface, tol: float) -> dict:
+    """{k: (uv, curve)} for every intersection piece k of `loop` between two other curves: its branch's
+    stretch from the previous piece's end to the next one's start (`IntersectionCurve.stretch`), the
+    piece as the loop takes it."""
+    pieces, out = loop.pieces, {}
+    for k, piece in enumerate(pieces):
+        before, after = pieces[k - 1], pieces[(k + 1) % len(pieces)]
+        if isinstance(piece, IntersectionCurve) and len(pieces) > 1 and \
+                not isinstance(before, IntersectionCurve) and not isinstance(after, IntersectionCurve):
+            out[k] = piece.stretch(surface, piece_ends(surface, before)[1], piece_ends(surface, after)[0], tol)
+    return out
 
 
 def _chain(face, lp, ends, free, tol, out) -> None:
@@ -268,7 +263,8 @@ def _on_surface(surface, pts2: np.ndarray) -> np.ndarray:
     return surface.nurbs().evaluate(pts2[:, 0], pts2[:, 1])
 
 
-def _ends3(surface, piece) -> tuple[np.ndarray, np.ndarray]:
+def piece_ends(surface, piece) -> tuple[np.ndarray, np.ndarray]:
+    """The 3-D start and end of a trimming-loop piece (a 2-D piece's through its surface)."""
     ends = np.array([piece.start, piece.end], float)
     return tuple(_on_surface(surface, ends)) if piece.dim == 2 else (ends[0], ends[1])
 
@@ -284,7 +280,7 @@ def _loop(face: O.TrimmedFace, lp: O.Loop, tol: float, out: list) -> None:
     out.extend(problems)
     if problems:
         return  # closure is meaningless until the pieces are on the surface
-    _chain(face, lp, [_ends3(surface, p) for p in lp.pieces], [False] * len(lp.pieces), tol, out)
+    _chain(face, lp, [piece_ends(surface, p) for p in lp.pieces], [False] * len(lp.pieces), tol, out)
 
 
 def _inside_domain(surface, piece, i: int, tol: float, lp) -> Diagnostic | None:

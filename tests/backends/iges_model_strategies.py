@@ -276,6 +276,26 @@ def assert_same_approximation(a: IntersectionCurve, b, tol: float, where: str):
         assert _distance_to(s, pts).max() <= tol, f"{where}: off an operand surface"
 
 
+def _same_lazy_loop(surface, a: Loop, b: Loop, tol: float, where: str, same):
+    """A loop whose intersection pieces became their approximation at `tol`: a piece between two curves
+    as the loop takes it, its branch's stretch between them (`loop_stretches`, bit-identical NURBS data
+    in model space or in the face's (u, v), and on both operands); the other pieces as `assert_same`."""
+    from rgm.model.validate import loop_stretches
+
+    assert len(a.pieces) == len(b.pieces), where
+    stretches = loop_stretches(a, surface, tol)
+    for i, (p, q) in enumerate(zip(a.pieces, b.pieces)):
+        if i not in stretches:
+            same(p, q, f".pieces[{i}]")
+            continue
+        assert isinstance(q, BSplineCurve), f"{where}.pieces[{i}]: {type(q).__name__}"
+        uv, curve = stretches[i]
+        _same_nurbs_curve(curve if q.dim == 3 else uv, q.curve, f"{where}.pieces[{i}]")
+        pts = curve.evaluate(np.linspace(*curve.domain, 65))
+        for s in (p.a, p.b):
+            assert _distance_to(s, pts).max() <= tol, f"{where}.pieces[{i}]: off an operand surface"
+
+
 def assert_same(a, b, size: float = 100.0, path: str = "", lowered=LOWERED, approximated: float | None = None):
     """Structural equality: kinds and names; NURBS data (degrees, knots, control points, weights) and
     line/polyline points bit-identical; analytic frames (arc centres, axis directions, planes) within
@@ -328,11 +348,15 @@ def assert_same(a, b, size: float = 100.0, path: str = "", lowered=LOWERED, appr
     elif isinstance(a, TrimmedFace):
         same(a.surface, b.surface, ".surface")
         assert (a.outer is None) == (b.outer is None), where
-        if a.outer is not None:
-            same(a.outer, b.outer, ".outer")
+        loops = ([(a.outer, b.outer, ".outer")] if a.outer is not None else []) + \
+            [(p, q, f".holes[{i}]") for i, (p, q) in enumerate(zip(a.holes, b.holes))]
         assert len(a.holes) == len(b.holes), where
-        for i, (p, q) in enumerate(zip(a.holes, b.holes)):
-            same(p, q, f".holes[{i}]")
+        for p, q, sub in loops:
+            if approximated is None:
+                same(p, q, sub)
+            else:
+                _same_lazy_loop(a.surface, p, q, approximated, f"{where}{sub}",
+                                lambda x, y, piece, sub=sub: same(x, y, f"{sub}{piece}"))
     elif isinstance(a, Shell):
         assert len(a.faces) == len(b.faces), where
         for i, (p, q) in enumerate(zip(a.faces, b.faces)):
