@@ -242,19 +242,21 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     within it, and OpenCASCADE builds the faces. Regressions: a seam's run following the branch to the end
     of its samples (an IndexError); patches 7 and 8, whose intersection marched at the tolerance joins a
     branch and a small closed loop where the surfaces nearly touch (OpenCASCADE splits them, and its edge
-    missed the joins by 4.47 mm): such a stretch is not shared."""
+    missed the joins by 4.47 mm): such a stretch is not shared; patches 4 and 9, whose stretch marched at
+    the tolerance ran from one branch onto another passing 0.57 mm away (OpenCASCADE's edge missed a join
+    by 2.33 mm): not shared either."""
     p = ycb_views(MEAT_CAN)
     result = fit_patches(p, 1.0, statistic="p95")
     assert all(s.fit.stats.holds and s.fit.stats.p95 <= 1.0 for s in result.shapes)
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
-    # 24 of 42 seams within 1 mm once the patches of the loose seams are refitted through common boundary
-    # curves (20 with a plain refit at 0.5 mm, 6 of 32 before the surfaces reached past their data); the
-    # worst seam 5.75 mm (5.13 mm: a short corner seam, 1-7)
+    # 25 of 41 seams within 1 mm once the patches of the loose seams are refitted through common boundary
+    # curves (20 of 42 with a plain refit at 0.5 mm, 6 of 32 before the surfaces reached past their data);
+    # the worst seam 4.45 mm (a short corner seam, 2-7)
     gaps = [g.max for g in result.gaps]
     print(f"meat can: {len(shared)} of {len(gaps)} seams shared, {sum(g <= 1.0 for g in gaps)} within 1 mm, "
           f"worst {max(gaps):.2f} mm, ctrl {[s.fit.n_ctrl for s in result.shapes]}")
-    assert sum(g <= 1.0 for g in gaps) >= 24 and max(gaps) < 6.0
+    assert sum(g <= 1.0 for g in gaps) >= 24 and max(gaps) < 5.0   # a seam of margin: figures move by machine
     assert all(g.why for g in result.gaps if not g.shared)
     text, _ = patches_text(result, 1.0, title="meat can")
     model = rgm.loads(text)
