@@ -49,11 +49,14 @@ merged views of a closed or wrapped part:
    those still over the tolerance are intersected again; a seam brought within it keeps separate trims,
    measured: intersections are most of the cost, and surfaces pulled together meet ill-conditioned); each
    group of patches linked by loose seams keeps its refit only if its seams do better, and the set is
-   kept if it brings more seams within the tolerance. A patch with a shared edge is refitted without
-   anchors (pulled along a band at its other seams, its re-intersected edge came out where
-   OpenCASCADE's exact intersection would not close the face). YCB mustard bottle at 1 mm: 20 of 21
-   seams within, worst 1.23 mm (the wrap halves, whose patches share edges), 4 shared (16 within, worst
-   1.48 mm, with a plain refit at half the tolerance); potted meat can: 25 of 41, 4 shared, worst 4.45 mm.
+   kept if it brings more seams within the tolerance. A patch with a shared edge is also held to that
+   edge: samples of the current intersection (`_shared_stretch`) are anchors at each surface's own
+   parameters of it, so the re-intersected edge stays near where it was and OpenCASCADE's exact intersection
+   still closes the face (unheld, pulled along a band at its other seams, it did not). YCB mustard
+   bottle at 1 mm: all 21 seams within, worst 0.95 mm, 3 shared (20 within, worst 1.23 mm at the wrap
+   halves, 4 shared, with such patches refitted without anchors; 16 within, worst 1.48 mm, with a plain
+   refit at half the tolerance); potted meat can: 26 of 42 within, 5 shared, worst 3.17 mm at a short
+   corner seam (25 of 41, 4 shared, worst 4.45 mm without).
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
@@ -421,11 +424,13 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     if not over:
         return patches, old_gaps
     loose = sorted({r for pair in over for r in pair})
-    # a patch with a shared edge is refitted without anchors: pulled along a band at its other seams, its
-    # re-intersected edge came out where OpenCASCADE's exact intersection would not close its face
-    sharing = {r for g in old_gaps if g.shared for r in (g.i, g.j)}
-    anchors = seam_anchors(points, plain, old_gaps, loose, near, spacing, _ANCHOR_TOL * tol)
-    anchors = {r: a for r, a in anchors.items() if r not in sharing}
+    # a shared edge is kept where it is: the refitted surface is held to it too (unheld, pulled along a band
+    # at its other seams, its re-intersected edge came out where OpenCASCADE's exact intersection would not
+    # close its face)
+    edges = {(g.i, g.j): _shared_stretch(cache, (g.i, g.j), (plain[g.i].shape.fit, plain[g.j].shape.fit), spacing)
+             for g in old_gaps if g.shared}
+    anchors = seam_anchors(points, plain, old_gaps, loose, near, spacing, _ANCHOR_TOL * tol,
+                           edges={pair: e for pair, e in edges.items() if e is not None})
     again = list(plain)
     for r in loose:
         q = plain[r]
@@ -464,19 +469,35 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     return shared, new_gaps
 
 
+def _shared_stretch(cache, pair, fits, spacing: float):
+    """The shared edge of `pair` (i, j) that `rgm.fitters.shared_edges.share_boundaries` found for `fits`
+    (its two faces' fits), from its cache: ({face: (k, 2) its parameters}, (k, 3) points), samples of the
+    intersection branch's stretch about half a point spacing apart; None when that pair of fits has none."""
+    c = next((c for a, b, c in cache.get(pair, []) if a is fits[0] and b is fits[1]), None)
+    if c is None or isinstance(c, str):
+        return None
+    xyz = c.xyz[c.lo:c.hi + 1]
+    length = float(np.linalg.norm(np.diff(xyz, axis=0), axis=1).sum())
+    k = np.unique(np.linspace(0, len(xyz) - 1, int(np.clip(2 * length / spacing, 16, len(xyz)))).astype(int))
+    return {f: c.uv[f][c.lo:c.hi + 1][k] for f in pair}, xyz[k]
+
+
 def seam_anchors(points, patches: list[PatchFit], gaps: list[Gap], refit, near: float, spacing: float,
-                 anchor_tol: float | None = None, weight: float | None = None) -> dict:
+                 anchor_tol: float | None = None, weight: float | None = None, edges=None) -> dict:
     """`Anchors` per patch in `refit` (met within `anchor_tol`): a common boundary curve for each of
-    its seams that is not shared. The samples of each face's trimming loop (about half a point spacing
-    apart, `rgm.fitters.shared_edges`) on the seam with the neighbour (nearest other point within `near`)
-    and their closest points on the neighbour's surface; the target is their midpoint when both patches
-    are refitted, the fixed neighbour's surface when only one is. Each refitted surface takes the
-    targets at its own parameters: the sample's, or its closest point's. `patches` have their own
-    (data) loops, not shared ones."""
+    its seams. A shared seam's curve is its shared edge, from `edges` ({(i, j): ({face: (k, 2)
+    parameters}, (k, 3) points)}, `_shared_stretch`): the refitted surface is held to its current
+    intersection with the neighbour, so that the edge stays near where it was. Along the others, the samples
+    of each face's trimming loop (about half a point spacing apart, `rgm.fitters.shared_edges`) on the
+    seam with the neighbour (nearest other point within `near`) and their closest points on the
+    neighbour's surface; the target is their midpoint when both patches are refitted, the fixed
+    neighbour's surface when only one is. Each refitted surface takes the targets at its own parameters:
+    the sample's, or its closest point's. `patches` have their own (data) loops, not shared ones."""
     from rgm.fitters.shared_edges import _loop_samples, _owners
     from rgm.geometry.inversion import closest_point_surface
 
     weight = _ANCHOR_WEIGHT if weight is None else weight
+    edges = edges or {}
     label = np.full(len(points), -1)
     for r, p in enumerate(patches):
         label[p.indices] = r
@@ -494,10 +515,14 @@ def seam_anchors(points, patches: list[PatchFit], gaps: list[Gap], refit, near: 
         xyz = p.shape.nurbs().evaluate(uv[:, 0], uv[:, 1])
         owner = _owners(points, label, a, xyz, near)
         for b in sorted(partners):
+            pair = (min(a, b), max(a, b))
+            if pair in shared:   # the surfaces cross there: held to their intersection, which stays the edge
+                if a in refit and pair in edges:
+                    out[a][0].append(edges[pair][0][a])
+                    out[a][1].append(edges[pair][1])
+                continue
             on = owner == b
             if not on.any():
-                continue
-            if (min(a, b), max(a, b)) in shared:   # the surfaces cross there: their intersection is the curve
                 continue
             ub, vb, foot, _ = closest_point_surface(patches[b].shape.nurbs(), xyz[on])
             foot = np.asarray(foot)

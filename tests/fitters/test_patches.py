@@ -212,15 +212,17 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     assert len(gaps) >= len(result) - 1 and np.all(np.isfinite(gaps))
     # the bottom, shoulder and cap creases are shared where the surfaces cross (each reaches past its data,
     # so no domain edge clamps the intersection): within the tolerance along the edge; every pair not
-    # shared says why. The patches of the seams still over 1 mm (9 of 21) are fitted again at 0.5 mm, those
-    # without a shared edge through their common boundary curves (the midpoints between the two surfaces
-    # along both faces' trims) as anchors: 20 of the 21 seams are then within the tolerance, worst 1.23 mm
-    # (the wrap halves 1-2, whose patches share edges and so are refitted without anchors; 16 with a
-    # plain refit at 0.5 mm, worst 1.48 mm; 7 of 18 before the surfaces reached past their data)
+    # shared says why. The patches of the seams still over 1 mm (9 of 21) are fitted again at 0.5 mm through
+    # their common boundary curves as anchors (the midpoints between the two surfaces along both faces'
+    # trims; along a shared edge, the current intersection): all 21 seams are then within the tolerance,
+    # worst 0.95 mm, 3 shared (1-6, shared after the refit when it was unheld, is now brought within by
+    # it and keeps separate trims, measured). 20 within, worst 1.23 mm (the wrap halves 1-2), 4 shared,
+    # with the patches that share an edge refitted without anchors; 16 with a plain refit at 0.5 mm; 7 of
+    # 18 before the surfaces reached past their data
     shared = [g for g in result.gaps if g.shared]
-    assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
+    assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     within = sum(g.max <= 1.0 for g in result.gaps)
-    assert within >= 20 and gaps.max() < 1.3
+    assert within >= 21 and gaps.max() <= 1.0
     assert max(g.max for g in shared) < min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
     for g in shared:   # one binding, used by both faces' loops
@@ -250,13 +252,14 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     assert all(s.fit.stats.holds and s.fit.stats.p95 <= 1.0 for s in result.shapes)
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
-    # 25 of 41 seams within 1 mm once the patches of the loose seams are refitted through common boundary
-    # curves (20 of 42 with a plain refit at 0.5 mm, 6 of 32 before the surfaces reached past their data);
-    # the worst seam 4.45 mm (a short corner seam, 2-7)
+    # 26 of 42 seams within 1 mm once the patches of the loose seams are refitted through common boundary
+    # curves, those with a shared edge held to it (25 of 41, worst 4.45 mm, when they were refitted without
+    # anchors; 20 of 42 with a plain refit at 0.5 mm, 6 of 32 before the surfaces reached past their data);
+    # 5 shared; the worst seam 3.17 mm (a short corner seam, 2-7)
     gaps = [g.max for g in result.gaps]
     print(f"meat can: {len(shared)} of {len(gaps)} seams shared, {sum(g <= 1.0 for g in gaps)} within 1 mm, "
           f"worst {max(gaps):.2f} mm, ctrl {[s.fit.n_ctrl for s in result.shapes]}")
-    assert sum(g <= 1.0 for g in gaps) >= 24 and max(gaps) < 5.0   # a seam of margin: figures move by machine
+    assert sum(g <= 1.0 for g in gaps) >= 25 and max(gaps) < 4.0   # a seam of margin: figures move by machine
     assert all(g.why for g in result.gaps if not g.shared)
     text, _ = patches_text(result, 1.0, title="meat can")
     model = rgm.loads(text)
