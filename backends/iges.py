@@ -272,8 +272,8 @@ class _Lowering:
         pieces = [(k, m) for k, p in enumerate(loop.pieces)
                   for m in (_flatten(p) if isinstance(p, CompositeCurve) else [p])]
         for k, piece in pieces:
-            b, c, crtn = self._loop_piece(piece, surface, near)
-            b, c = stretches.get(k, (b, c))
+            # an intersection between two curves: its stretch between them, in loop order (of any branch)
+            b, c, crtn = (*stretches[k], 2) if k in stretches else self._loop_piece(piece, surface, near)
             near = np.asarray(b.end, float)
             uv.append(self._piece(b, 2))
             xyz.append(self._piece(c, 3))

@@ -54,8 +54,8 @@ def _partials(surface, u, v):
     """S, S_u, S_v at paired parameters u, v (m,) inside the domain, each (m, 3).
 
     The same quantities as `surface.derivatives(u, v, 1)` (Piegl & Tiller A3.6 with the quotient
-    rule of A4.4), computed directly from the basis derivatives (A2.3) and the homogeneous net:
-    The exact fallback of `_evaluator` for degrees above the power form's.
+    rule of A4.4), computed directly from the basis derivatives (A2.3) and the homogeneous net: the
+    exact fallback of `_evaluator` for degrees above the power form's.
     """
     pu, pv = surface.degree_u, surface.degree_v
     su, sv = find_spans(surface.knots_u, pu, u), find_spans(surface.knots_v, pv, v)
