@@ -256,13 +256,24 @@ class _Lowering:
                 raise BackendError(f"the intersection{_of(piece)} has {len(branches)} branches; a loop piece "
                                    f"needs one")
             return piece.uv_curves(surface, self.tol)[0], branches[0].curve, 2
-        # the approximated partner curve is made far tighter than the file's tolerance, so that receivers
-        # that prefer it still get the exact geometry to ~1e-10 of the surface's size
-        ftol = min(self.tol, 1e-10 * _size(surface))
         if piece.dim == 2:
-            return piece, model_curve(surface, piece, ftol), 0
+            return piece, self._partner(lambda t: model_curve(surface, piece, t), surface), 0
         exact = piece.nurbs() if isinstance(piece, (Circle, CircularArc)) else piece   # see `_piece`
-        return parameter_curve(surface, exact, ftol, near), piece, 0
+        return self._partner(lambda t: parameter_curve(surface, exact, t, near), surface), piece, 0
+
+    def _partner(self, make, surface):
+        """The approximated partner curve of a loop piece, make(tol): far tighter than the file's tolerance,
+        1e-10 of the surface's size, so that receivers that prefer it still get the exact geometry; where
+        that cannot be reached (a trimming curve across a densely knotted fitted surface), 1e-8, then 1e-6
+        of the size, then the file's tolerance."""
+        size = _size(surface)
+        tols = sorted({min(self.tol, f * size) for f in (1e-10, 1e-8, 1e-6)} | {self.tol})
+        for t in tols[:-1]:
+            try:
+                return make(t)
+            except BackendError:
+                continue
+        return make(tols[-1])
 
     def _loop(self, loop: Loop, surface, sde: int) -> int:
         """142: CRTN, SPTR, BPTR (2-D curve or 102 of them), CPTR (3-D), PREF."""

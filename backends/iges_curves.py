@@ -21,6 +21,10 @@ from rgm.geometry import NurbsCurve
 from rgm.model import Circle, CircularArc, Plane, Polyline
 
 
+#: parameter tolerance (relative to the domain) of the foot points of a curve lying off its surface
+_OFF_SURFACE_UV = 1e-8
+
+
 def fit_parametric(func, breaks, tol: float, continuity=None, max_level: int = 9) -> NurbsCurve:
     """Cubic B-spline interpolant of `func` (params (m,) -> points (m, d)) with the parameter of its
     source, within `tol`. `breaks` (k,) are the source's knots and the parameters where its image may
@@ -222,7 +226,16 @@ def parameter_curve(surface, piece, tol: float, near=None) -> NurbsCurve:
         return uv
 
     breaks, cont = _knot_breaks(curve)
-    return fit_parametric(func, breaks, tol * scale / size, cont)
+    tol_uv = tol * scale / size
+    if nurbs.closest_point(curve.evaluate(np.linspace(*curve.domain, 257)))[3].max() > 1e-9 * size:
+        # a curve off the surface (a fitted seam curve between two patches): its foot points lose one
+        # order of smoothness where they cross a knot line of the surface, which becomes a break, and
+        # are found to about 1e-10 of the domain (a closest point off the surface is a flat minimum)
+        crossings, crossing_cont = _crossings(func, curve.domain, surface)
+        breaks = np.concatenate([breaks, crossings])
+        cont = np.concatenate([cont, np.maximum(crossing_cont - 1, 0)])
+        tol_uv = max(tol_uv, _OFF_SURFACE_UV * scale)
+    return fit_parametric(func, breaks, tol_uv, cont)
 
 
 def _seam_side(x, lo: float, hi: float, hint) -> np.ndarray:
