@@ -128,6 +128,7 @@ FUNCTIONS: dict[str, Builtin] = {b.name: b for b in (
                                         (list_of(POINT2), CURVE2), (NET, CURVE3)))),
     _f("profile", *_same(_PIECES, {CURVE3: CURVE3, CURVE2: CURVE2}, {"pieces"})),
     _f("uvline", ((_p("a", POINT2), _p("b", POINT2)), CURVE2)),
+    _f("reverse", *_same((_p("curve", CURVE3),), {CURVE3: CURVE3, CURVE2: CURVE2}, {"curve"})),
     # surfaces
     _f("revolve", ((_p("profile", CURVE3), _p("axis", CURVE3), _p("from", ANGLE, "0deg"),
                     _p("to", ANGLE, "360deg")), SURFACE)),

@@ -76,6 +76,16 @@ def _arc(start, through, end, span):
     return M.CircularArc(center[:dim], w, radius, p0, p2, span=span)
 
 
+def _reverse(a, span):
+    """The curve traversed the other way (its NURBS form reversed on the same domain): a loop piece that
+    a neighbouring face runs in the opposite direction, such as a seam curve two patches share."""
+    curve = a["curve"]
+    if isinstance(curve, M.IntersectionCurve):
+        raise GeometryError("an intersection has no direction of its own (a loop runs it from the previous "
+                            "piece's end): use it as it is")
+    return M.BSplineCurve(curve.nurbs().reverse(), span=span)
+
+
 def _bspline(a, span):
     pts = a["points"]
     weights = a["weights"]
@@ -151,6 +161,7 @@ def _make_builtins(tolerance: float) -> dict:
         "circle": lambda a, s: M.Circle(_xyz(a["center"]), _xyz(a["normal"]), a["radius"], span=s),
         "bspline": _bspline,
         "profile": lambda a, s: M.CompositeCurve(a["pieces"], span=s),
+        "reverse": _reverse,
         "revolve": _revolve,
         "bsurface": _bsurface,
         "plane": lambda a, s: M.Plane(_xyz(a["origin"]), _xyz(a["normal"]), span=s),

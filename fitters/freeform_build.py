@@ -101,7 +101,12 @@ def patch_part(result) -> FreeformPart:
         out.shapes.append(p.shape)
         out.info.append(_describe(p.shape, f"projection onto a {p.base.kind}", len(p.indices), p.seconds))
     for g in result.gaps:
-        if g.shared:
+        if g.shared and g.curve:
+            out.notes.append(f"patches {g.i + 1} | {g.j + 1}: one shared edge, a curve midway between their surfaces "
+                             f"(seam_{g.i + 1}_{g.j + 1}, {g.length:.1f} mm; they do not cross along it): G0 gap "
+                             f"on it max {g.max:.2g} mm, p95 {g.p95:.2g} mm ({g.samples} samples of both faces' "
+                             f"edges); separate trims were {g.before:.4f} mm apart")
+        elif g.shared:
             out.notes.append(f"patches {g.i + 1} | {g.j + 1}: one shared edge, the intersection of their surfaces "
                              f"({g.length:.1f} mm): G0 gap on it max {g.max:.2g} mm, p95 {g.p95:.2g} mm ({g.samples} "
                              f"samples of both faces' edges as approximated at the tolerance); separate trims "

@@ -317,6 +317,31 @@ def _curve2(piece):
     return text, BSplineCurve(NurbsCurve(piece.degree, knots, ctrl, None))
 
 
+def _curve3(curve):
+    """`bspline(...)` text of a 3-D NurbsCurve (a seam curve, model units) and the model curve it reads back as."""
+    from rgm.geometry import NurbsCurve
+    from rgm.model import BSplineCurve
+
+    ktext, knots = _knots(curve.knots)
+    texts, ctrl = _printed(curve.ctrl, _DEC)
+    text = f"bspline({curve.degree}, {ktext}, net {len(ctrl)} [{', '.join(_entries(texts, 3))}])"
+    return text, BSplineCurve(NurbsCurve(curve.degree, knots, ctrl, None))
+
+
+def _directed(edge, nurbs, uv_before):
+    """A seam curve's (text, model curve) as a loop piece after a piece ending at `uv_before` on surface
+    `nurbs`: `reverse(...)` when the loop meets it at its end."""
+    from rgm.model import BSplineCurve
+
+    text, curve = edge
+    c = curve.nurbs()
+    here = nurbs.evaluate(*np.asarray(uv_before, float)[:, None])[0]
+    tips = c.evaluate(np.array(c.domain, float))
+    if np.linalg.norm(here - tips[0]) <= np.linalg.norm(here - tips[1]):
+        return edge
+    return f"reverse({text})", BSplineCurve(c.reverse())
+
+
 def _cut(piece: PlanarCut, surf: str, surface, tolerance: float, ends):
     """`intersect(surface, plane(...))` text and model curve; the plane pinned through the printed
     surface's points at the printed ends `ends` (uv_start, uv_end) of the neighbouring pieces, written with
@@ -379,6 +404,8 @@ def emit_freeform(shape: FreeformShape, name: str, suffix: str = "", *, toleranc
             outer[k] = _cut(p, surf, surface, tolerance, ends)
         elif isinstance(p, SharedEdge):
             outer[k] = edges[p.pair]
+            if p.curve is not None:   # a seam curve: run it the way the loop goes (from the piece before)
+                outer[k] = _directed(outer[k], surface.nurbs(), outer[k - 1][1].nurbs().ctrl[-1])
     bindings.append(f"boundary{suffix} := loop(\n    " + ",\n    ".join(t for t, _ in outer) + ");")
     holes, hole_loops = [], []
     for k, hole in enumerate(shape.holes, 1):
@@ -402,10 +429,19 @@ def emit_freeform_set(shapes, names, suffixes, *, tolerance: float) -> list:
 
     printed = [_surface_binding(s, suffix) for s, suffix in zip(shapes, suffixes)]
     pairs = sorted({p.pair for s in shapes for p in s.outer if isinstance(p, SharedEdge)})
-    if pairs:   # the corners exactly on the printed surfaces' intersections
-        shapes = snap_joins(shapes, [surface.nurbs() for _, surface in printed])
     edges, texts = {}, {k: [] for k in range(len(shapes))}
+    seams = {p.pair: p.curve for s in shapes for p in s.outer if isinstance(p, SharedEdge) and p.curve is not None}
+    for (i, j), curve in sorted(seams.items()):
+        seam = f"seam{suffixes[i]}{suffixes[j]}"
+        text, model_curve = _curve3(curve)
+        texts[i].append(f"{seam} := {text};")
+        edges[(i, j)] = (seam, model_curve)
+    if pairs:   # the corners exactly on the printed surfaces' intersections (or the seam curves' ends)
+        shapes = snap_joins(shapes, [surface.nurbs() for _, surface in printed],
+                            {pair: edges[pair][1].nurbs() for pair in seams})
     for i, j in pairs:
+        if (i, j) in seams:
+            continue
         crease = f"crease{suffixes[i]}{suffixes[j]}"
         texts[i].append(f"{crease} := intersect(surface{suffixes[i]}, surface{suffixes[j]});")
         edges[(i, j)] = (crease, IntersectionCurve(printed[i][1], printed[j][1], tolerance, name=crease))

@@ -52,11 +52,16 @@ merged views of a closed or wrapped part:
    kept if it brings more seams within the tolerance. A patch with a shared edge is also held to that
    edge: samples of the current intersection (`_shared_stretch`) are anchors at each surface's own
    parameters of it, so the re-intersected edge stays near where it was and OpenCASCADE's exact intersection
-   still closes the face (unheld, pulled along a band at its other seams, it did not). YCB mustard
+   still closes the face (unheld, pulled along a band at its other seams, it did not).
+   Last, the seams still over the tolerance whose surfaces do not cross along them (meeting tangentially,
+   stopping short, crossing elsewhere) are shared as one curve midway between the two surfaces where one
+   lies within the tolerance of both (`rgm.fitters.seam_curves`: `seam_i_j := bspline(...)` in both
+   loops), the shared intersections kept as they were; the set is kept if it scores better. YCB mustard
    bottle at 1 mm: all 21 seams within, worst 0.95 mm, 3 shared (20 within, worst 1.23 mm at the wrap
    halves, 4 shared, with such patches refitted without anchors; 16 within, worst 1.48 mm, with a plain
-   refit at half the tolerance); potted meat can: 26 of 42 within, 5 shared, worst 3.17 mm at a short
-   corner seam (25 of 41, 4 shared, worst 4.45 mm without).
+   refit at half the tolerance); potted meat can: 28 of 42 within, 5 intersections and 2 seam curves
+   shared, worst 3.17 mm at a short corner seam (26 of 42 without seam curves; 25 of 41, worst 4.45 mm,
+   with the refit unheld).
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
@@ -305,8 +310,9 @@ class Gap:
     """The measured G0 gap between patches i and j (model units): max and 95th percentile of `samples`
     distances. `shared`: the faces share their boundary there, one `intersect(surface_i, surface_j)` in
     both loops (`rgm.fitters.shared_edges`), and the figures are measured along it as the back ends see it
-    (`length` mm long; `before`: the max with separate trims). Otherwise the distances of boundary samples
-    of each patch (near the other) to the other patch's surface, and `why` says why nothing is shared."""
+    (`length` mm long; `before`: the max with separate trims); `curve`: the shared edge is one 3-D curve
+    midway between the surfaces (`rgm.fitters.seam_curves`) instead. Otherwise the distances of boundary
+    samples of each patch (near the other) to the other patch's surface, and `why` says why nothing is shared."""
 
     i: int
     j: int
@@ -317,6 +323,7 @@ class Gap:
     length: float = 0.0
     before: float | None = None
     why: str = ""
+    curve: bool = False
 
 
 @dataclass
@@ -398,8 +405,9 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     where that holds (each surface then nearer the crease's data that both approximate, so nearer each
     other, or crossing where they did not), else at `tol`. The refitted set is shared and measured
     again; each group of patches linked by seams over `tol` keeps its refit only if the seams it
-    touches score better (`_score`), and the whole set is kept when it scores better. Returns (patches
-    with their shared loops, gaps)."""
+    touches score better (`_score`), and the whole set is kept when it scores better. Last, the seams still
+    over `tol` may share one curve midway between their surfaces (`with_curves`, kept if it scores better).
+    Returns (patches with their shared loops, gaps)."""
     from scipy.sparse.csgraph import connected_components
 
     from rgm.fitters.shared_edges import share_boundaries
@@ -417,6 +425,22 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
         tried = [g for g in measured if g.max > tol or (g.i, g.j) in was]
         done = {(g.i, g.j): g for g in share_boundaries(points, copy, tried, tol, near, spacing, cache)}
         return [done.get((g.i, g.j)) or replace(g, why=_WITHIN) for g in measured], copy
+
+    def with_curves(fits, result, gaps):
+        # the seams still over the tolerance whose intersection cannot be shared: one curve midway between
+        # the surfaces, in both loops, where one lies within the tolerance of both; the pairs shared before
+        # are shared again as they were (their candidates cached), the rest kept as measured
+        if not any(g.max > tol for g in gaps):
+            return result, gaps
+        copy = [PatchFit(q.indices, q.base, q.shape, q.seconds, q.params) for q in fits]
+        tried = [replace(g, max=g.before, shared=False) if g.shared else g for g in gaps if g.shared or g.max > tol]
+        done = {(g.i, g.j): g for g in share_boundaries(points, copy, tried, tol, near, spacing, cache, curves=True)}
+        out = [done.get((g.i, g.j), g) for g in gaps]
+        if _score(out, tol) > _score(gaps, tol):
+            return copy, out
+        # kept as they were, with the reasons no curve was shared either
+        return result, [replace(g, why=done[(g.i, g.j)].why) if not g.shared and (g.i, g.j) in done
+                        and not done[(g.i, g.j)].shared else g for g in gaps]
 
     plain = [PatchFit(q.indices, q.base, q.shape, q.seconds, q.params) for q in patches]
     old_gaps = share_boundaries(points, patches, gaps, tol, near, spacing, cache)   # shares into `patches`
@@ -446,7 +470,7 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
                 again[r] = fit
                 break
     if all(a is b for a, b in zip(again, plain)):
-        return patches, old_gaps
+        return with_curves(plain, patches, old_gaps)
     new_gaps, shared = share(again, old_gaps)
     # each group of patches linked by seams over the tolerance keeps its refit if its seams do better
     pairs = np.array(over).T
@@ -462,11 +486,11 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
                 keep[r] = plain[r]
     if any(a is not b for a, b in zip(keep, again)):
         if all(a is b for a, b in zip(keep, plain)):
-            return patches, old_gaps
+            return with_curves(plain, patches, old_gaps)
         new_gaps, shared = share(keep, old_gaps)
     if _score(new_gaps, tol) <= _score(old_gaps, tol):
-        return patches, old_gaps
-    return shared, new_gaps
+        return with_curves(plain, patches, old_gaps)
+    return with_curves(keep, shared, new_gaps)
 
 
 def _shared_stretch(cache, pair, fits, spacing: float):

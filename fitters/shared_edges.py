@@ -44,12 +44,15 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    than surface j itself), and the other way. A pair whose measured gap exceeds the tolerance keeps its separate trims.
 
 Seams left over the tolerance are handled by `rgm.fitters.patches`: their patches are refitted through a
-common boundary curve (anchors) and shared again here; a `cache` keeps each pair's candidate per pair of
-fits, so that pairs whose patches were not refitted are not intersected again.
+common boundary curve (anchors) and shared again here; with `curves`, a seam whose intersection cannot be
+shared may share one curve midway between the surfaces instead (`rgm.fitters.seam_curves`, a `SharedEdge`
+with its `curve`: rebuilt and measured the same way, dropped before any intersection where a loop fails);
+a `cache` keeps each pair's candidate per pair of fits, so that pairs whose patches were not refitted are
+not intersected again.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -68,10 +71,12 @@ _MIN_AREA_RATIO = 0.8
 @dataclass(frozen=True)
 class SharedEdge:
     """A loop piece that is the intersection of this face's surface with neighbour `other`'s (indices into
-    the patch list); `pair` (i, j), i < j, names the one curve both faces' loops use."""
+    the patch list); `pair` (i, j), i < j, names the one curve both faces' loops use. With `curve` (a 3-D
+    NurbsCurve midway between both surfaces, `rgm.fitters.seam_curves`), the piece is that curve instead."""
 
     other: int
     pair: tuple
+    curve: object = field(default=None, compare=False)
 
 
 @dataclass
@@ -107,6 +112,7 @@ class _Candidate:
     runs: dict             # face -> _Run
     rising: dict           # face -> bool: the run goes from lo to hi
     branches: list         # all branches of surface i ∩ surface j at the model tolerance
+    curve: object = None   # a 3-D NurbsCurve midway between the surfaces: the edge instead of the branch
 
 
 def _piece_points(piece, m):
@@ -174,16 +180,36 @@ def _normals_angle(si, sj, uv_i, xyz) -> float:
     return float(np.degrees(np.arccos(np.clip(np.median(cos), 0, 1))))
 
 
-def _candidate(i, j, shapes, loops, tol, near, spacing):
-    """A _Candidate for the pair (i, j), or the reason (str) why its seam keeps separate trims."""
-    from rgm.geometry.intersect import intersect_surfaces
-
+def _seam_runs(i, j, loops):
+    """{face: its _Run of the seam} for faces i and j, or the reason (str) why the seam is too short."""
     runs = {}
     for a, b in ((i, j), (j, i)):
         run = _longest_run(loops[a].owner == b)
         if run is None or len(run.idx) < 6:
             return "the seam is too short on one side to share"
         runs[a] = run
+    return runs
+
+
+def _seam_curve(i, j, shapes, loops, tol, near, spacing, reason: str):
+    """The pair's seam as one curve midway between their surfaces (`rgm.fitters.seam_curves.seam_curve`),
+    where `reason` says why their intersection cannot be shared; or both reasons (str)."""
+    from rgm.fitters.seam_curves import seam_curve
+
+    runs = _seam_runs(i, j, loops)
+    if isinstance(runs, str):
+        return reason
+    curve = seam_curve(i, j, shapes, loops, runs, tol, near, spacing)
+    return curve if not isinstance(curve, str) else f"{reason}; {curve}"
+
+
+def _candidate(i, j, shapes, loops, tol, near, spacing):
+    """A _Candidate for the pair (i, j), or the reason (str) why its seam keeps separate trims."""
+    from rgm.geometry.intersect import intersect_surfaces
+
+    runs = _seam_runs(i, j, loops)
+    if isinstance(runs, str):
+        return runs
     si, sj = shapes[i].nurbs(), shapes[j].nurbs()
     run_i = runs[i].idx[np.unique(np.linspace(0, len(runs[i].idx) - 1, 24).astype(int))]
     angle = _normals_angle(si, sj, loops[i].uv[run_i], loops[i].xyz[run_i])
@@ -274,7 +300,7 @@ def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float
         ends = (c.lo, c.hi) if c.rising[k] else (c.hi, c.lo)
         a, b = ends
         arc = c.uv[k][a:b + 1] if a <= b else c.uv[k][b:a + 1][::-1]
-        pieces.append(SharedEdge(other, (c.i, c.j)))
+        pieces.append(SharedEdge(other, (c.i, c.j), c.curve))
         poly.append(arc[np.unique(np.linspace(0, len(arc) - 1, min(len(arc), 120)).astype(int))][:-1])
         # the data from this run's end to the next run's start, without the samples a shared edge covers
         start = run.end + 1
@@ -380,14 +406,19 @@ def _to_polyline(points, polyline) -> np.ndarray:
     return best
 
 
-def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: float, cache=None) -> list:
+def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: float, cache=None,
+                     curves: bool = False) -> list:
     """Make neighbouring patches share their boundary: for each seam in `gaps` (separate-trim Gaps from
     `g0_gaps`), the intersection of both surfaces in both loops where it can be (module docstring),
     patches[k].shape replaced accordingly. Returns the Gaps: shared ones measured on the shared edge
     (`before`: the separate trims' figure), the others as they were, with the reason. `cache` (a dict,
     kept by the caller between calls on the same points) holds each pair's candidate edges or reasons with
-    the two fits they came from: a pair of fits already seen is not intersected again."""
+    the two fits they came from: a pair of fits already seen is not intersected again. With `curves`, a
+    seam over `tol` whose intersection cannot be shared gets one curve midway between the surfaces
+    (`rgm.fitters.seam_curves`) where one lies within `tol` of both; where a rebuilt loop fails, such
+    curves are dropped before any intersection is."""
     from rgm.fitters.freeform_part import FreeformShape, _surface_speed
+    from rgm.fitters.seam_curves import measure_curve
 
     label = np.full(len(points), -1)
     for r, p in enumerate(patches):
@@ -406,6 +437,8 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
         if c is None:
             c = _candidate(g.i, g.j, shapes, loops, tol, near, spacing)
             seen.append((*fits, c))
+        if curves and isinstance(c, str) and g.max > tol:
+            c = _seam_curve(g.i, g.j, shapes, loops, tol, near, spacing, c)
         if isinstance(c, str):
             why[(g.i, g.j)] = c
         else:
@@ -419,10 +452,13 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
             tol_uv = tol / _surface_speed(shapes[k].fit)
             out = rebuild_loop(k, shapes[k], loops[k], mine, tol_uv, reach)
             if isinstance(out, str):
-                # the pairs to drop: the one without which the loop can be rebuilt, if there is one
-                culprit = next((c for c in mine if len(mine) > 1 and not isinstance(
+                # the pairs to drop: the one without which the loop can be rebuilt, if there is one; seam
+                # curves before intersections (a curve never costs a face an intersection it could share)
+                seams = [c for c in mine if c.curve is not None]
+                suspects = seams or mine
+                culprit = next((c for c in suspects if len(mine) > 1 and not isinstance(
                     rebuild_loop(k, shapes[k], loops[k], [d for d in mine if d is not c], tol_uv, reach), str)), None)
-                failed[k] = (out, [(culprit.i, culprit.j)] if culprit else [(c.i, c.j) for c in mine])
+                failed[k] = (out, [(culprit.i, culprit.j)] if culprit else [(c.i, c.j) for c in suspects])
             else:
                 new[k] = FreeformShape(shapes[k].fit, shapes[k].loops, out, shapes[k].holes)
         for k, (reason, pairs) in failed.items():
@@ -435,7 +471,9 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
         bad = False
         for (i, j) in list(cands):
             if (i, j) not in measured:   # a pair's edge and joins do not depend on the other pairs
-                measured[(i, j)] = measure_shared(i, j, new[i], new[j], tol, cands[(i, j)].branches)
+                c = cands[(i, j)]
+                measured[(i, j)] = measure_shared(i, j, new[i], new[j], tol, c.branches) if c.curve is None \
+                    else measure_curve(i, j, new[i], new[j], c.curve)
             if measured[(i, j)][0] > tol:
                 why[(i, j)] = f"the shared edge was measured {measured[(i, j)][0]:.3g} mm apart, over the tolerance"
                 del cands[(i, j)]
@@ -450,20 +488,26 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
         pair = (g.i, g.j)
         if pair in measured:
             gmax, p95, n, length = measured[pair]
-            out.append(replace(g, max=gmax, p95=p95, samples=n, shared=True, length=length, before=g.max))
+            out.append(replace(g, max=gmax, p95=p95, samples=n, shared=True, length=length, before=g.max, why="",
+                               curve=cands[pair].curve is not None))
         else:
             out.append(replace(g, why=why.get(pair, "")))
     return out
 
 
-def snap_joins(shapes, surfaces) -> list:
+def snap_joins(shapes, surfaces, curves=None) -> list:
     """The shapes with every join (the ends of the data pieces beside a SharedEdge) moved exactly onto
     the intersection of the two *printed* surfaces `surfaces` (NurbsSurfaces, one a shape): each join of
     a pair is one 3-D point, solved on both surfaces at once from the two faces' joins (minimum-norm
     Newton on S_i(u, v) = S_j(s, t)), so each back end finds its approximation of the intersection passing
-    through the ends of both faces' neighbouring pieces to its own precision, and the faces' corners meet."""
+    through the ends of both faces' neighbouring pieces to its own precision, and the faces' corners meet.
+    A pair in `curves` ({pair: printed 3-D NurbsCurve}) shares that curve: each face's joins are the
+    closest points on its printed surface of the curve's ends, where the back ends start its edge."""
     from rgm.fitters.freeform_part import FreeformShape
     from rgm.geometry.intersect import _newton_min_norm, _SurfaceProblem
+    from rgm.geometry.inversion import closest_point_surface
+
+    curves = curves or {}
 
     def joins(k, pair):
         pieces = shapes[k].outer
@@ -473,6 +517,19 @@ def snap_joins(shapes, surfaces) -> list:
     outer = [list(s.outer) for s in shapes]
     pairs = sorted({p.pair for s in shapes for p in s.outer if isinstance(p, SharedEdge)})
     for i, j in pairs:
+        if (i, j) in curves:
+            c = curves[(i, j)]
+            tips = c.evaluate(np.array(c.domain, float))
+            for k in (i, j):
+                before, after = joins(k, (i, j))
+                u, v = closest_point_surface(surfaces[k], tips)[:2]
+                here = surfaces[k].evaluate(*np.asarray(outer[k][before].ctrl[-1], float)[:, None])[0]
+                first, last = (0, 1) if np.linalg.norm(here - tips[0]) <= np.linalg.norm(here - tips[1]) else (1, 0)
+                for index, end, tip in ((before, -1, first), (after, 0, last)):
+                    ctrl = outer[k][index].ctrl.copy()
+                    ctrl[end] = (u[tip], v[tip])
+                    outer[k][index] = replace(outer[k][index], ctrl=ctrl)
+            continue
         si, sj = surfaces[i], surfaces[j]
         ends_i, ends_j = joins(i, (i, j)), joins(j, (i, j))
         # face i's pieces before / after the edge end / start at its two joins; match face j's by 3-D point

@@ -247,7 +247,8 @@ def curve3(draw, env, depth=1, force=None):
     return _with(draw, env, "curve3", depth, force, line=lambda: (lambda a: call("line", a, add(a, s())))(p()),
                  polyline=lambda: call("polyline", points(draw, env)), circle=circle,
                  arc=lambda: (lambda a: call("arc", a, add(a, step(1)), add(a, step(2))))(p()),
-                 bspline=lambda: bspline(draw, env, 3), profile=joined)
+                 bspline=lambda: bspline(draw, env, 3), profile=joined,
+                 reverse=lambda: call("reverse", bspline(draw, env, 3)))
 
 
 def _box(u0, v0, u1, v1):
@@ -262,6 +263,7 @@ def curve2(draw, env, depth=0, force=None):
         "polyline": lambda: call("polyline", A.ListExpr(tuple(c[:draw(st.integers(2, 4))]))),
         "arc": lambda: call("arc", c[0], c[1], c[2]), "bspline": lambda: bspline(draw, env, 2),
         "profile": lambda: call("profile", call("uvline", c[0], c[1]), call("uvline", c[1], c[2])),
+        "reverse": lambda: call("reverse", call("uvline", c[draw(st.integers(1, 3))], c[0])),
         "name": _named(draw, env, "curve2")}, force)
 
 
@@ -275,6 +277,7 @@ def loop(draw, env, depth=0, force=None, hole=False):
     bulge = uv_point(0.5, 0.45 if hole else 0.2)
     return _with(draw, env, "loop", depth, force,
                  rect=lambda: call("loop", *(line(i, (i + 1) % 4) for i in range(4))),
+                 reversed=lambda: call("loop", call("reverse", line(1, 0)), line(1, 2), line(2, 3), line(3, 0)),
                  polyline=lambda: call("loop", call("polyline", A.ListExpr(tuple(c) + (c[0],)))),
                  bspline=lambda: call("loop", call("bspline", degree=N(2), knots=call("uniform", N(2), N(3)),
                                                    points=A.ListExpr((c[0], c[1], c[2]))), line(2, 0)),
