@@ -227,7 +227,7 @@ def parameter_curve(surface, piece, tol: float, near=None) -> NurbsCurve:
 
     breaks, cont = _knot_breaks(curve)
     tol_uv = tol * scale / size
-    if nurbs.closest_point(curve.evaluate(np.linspace(*curve.domain, 257)))[3].max() > 1e-9 * size:
+    if nurbs.closest_point(curve.evaluate(np.linspace(*curve.domain, 33)))[3].max() > 1e-9 * size:
         # a curve off the surface (a fitted seam curve between two patches): its foot points lose one
         # order of smoothness where they cross a knot line of the surface, which becomes a break, and
         # are found to about 1e-10 of the domain (a closest point off the surface is a flat minimum)

@@ -7,13 +7,14 @@ spacings inside its data, missed each other by a few millimetres at a 1 mm toler
 can: 16 of 42 seams). Yet the surfaces themselves usually pass within the tolerance of each other along
 the seam; only the trims are apart. Here such a seam becomes one curve that both faces' loops use:
 
-1. The seam samples of face i's data loop (`rgm.fitters.shared_edges`: the longest run whose nearest other
-   point belongs to face j) are moved midway between the surfaces by alternating closest points,
-   x <- (P_i(x) + P_j(x)) / 2, which converges onto the intersection where the surfaces cross and onto the
-   middle of their closest approach where they do not (`_ROUNDS` rounds: each halves the distance).
-2. The stretch both faces border (face j's run located on it, the mean of the two faces' ends, as for an
-   intersection) is fitted by a cubic B-spline to a twentieth of the tolerance (`fit_curve`: knots
-   inserted where it is exceeded).
+1. The seam samples of one face's data loop (`rgm.fitters.shared_edges`: the longer of the two faces'
+   runs whose nearest other point belongs to the other face) are moved midway between the surfaces by
+   alternating closest points, x <- (P_i(x) + P_j(x)) / 2 (`_ROUNDS` rounds), which brings them onto the
+   intersection where the surfaces cross (a round shrinks the distance to it by (1 + cos t) / 2 at worst,
+   t the crossing angle, and the distances to the surfaces by (1 - cos t) / 2) and into the middle of their
+   closest approach where they do not.
+2. The stretch both faces border (the other face's seam samples located on it) is fitted by a cubic
+   B-spline to a twentieth of the tolerance (`fit_curve`: knots inserted where it is exceeded).
 3. Each back end takes a 3-D trimming curve's closest points on its face's surface, so the two faces'
    edges lie at most d_i + d_j apart, d being the curve's distance from each surface: the curve is used
    only if d_i + d_j <= the tolerance at dense samples, and its closest points on each surface do not
@@ -32,7 +33,7 @@ from rgm.errors import GeometryError
 
 __all__ = ["seam_curve", "measure_curve", "curve_edge"]
 
-_ROUNDS = 8         # alternating closest-point rounds (each halves the distance between the surfaces' feet)
+_ROUNDS = 8         # alternating closest-point rounds
 _FIT = 20           # the curve is fitted to tol / _FIT
 _SAMPLES = 400      # dense samples of the curve: its distance to both surfaces, each face's uv of it
 _JUMP = 8           # a step between consecutive closest points this many times their median is a jump
@@ -122,14 +123,11 @@ def measure_curve(i: int, j: int, shape_i, shape_j, curve) -> tuple[float, float
     """(max, p95, samples, length) of the G0 gap along a shared 3-D seam curve as the back ends see it:
     each face's edge is its surface at the closest points of the curve's samples; the points of each
     edge are measured to the other edge (a dense polyline), both ways."""
-    from rgm.fitters.shared_edges import _to_polyline
+    from rgm.fitters.shared_edges import edge_gap
 
     edges = []
     for shape in (shape_i, shape_j):
         s = shape.nurbs()
         uv, _ = curve_edge(s, curve, 4 * _SAMPLES)
         edges.append(s.evaluate(uv[:, 0], uv[:, 1]))
-    ea, eb = edges
-    d = np.concatenate([_to_polyline(ea, eb), _to_polyline(eb, ea)])
-    length = float(np.linalg.norm(np.diff(ea, axis=0), axis=1).sum())
-    return float(d.max()), float(np.percentile(d, 95)), len(d), length
+    return edge_gap(*edges)

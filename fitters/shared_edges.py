@@ -386,9 +386,14 @@ def measure_shared(i, j, shape_i, shape_j, tol: float, branches=None) -> tuple[f
         before, after = pieces[k - 1], pieces[(k + 1) % len(pieces)]
         uv = branch_between(curve.uv_curves(surface), before.ctrl[-1], after.ctrl[0])
         edges.append(surface.nurbs().evaluate(uv[:, 0], uv[:, 1]))
-    ea, eb = edges
-    d = np.concatenate([_to_polyline(ea, eb), _to_polyline(eb, ea)])   # not below either's distance to the
-    # other surface, on which the other edge lies
+    return edge_gap(*edges)
+
+
+def edge_gap(ea, eb) -> tuple[float, float, int, float]:
+    """(max, p95, samples, length) of the G0 gap between two faces' edges, dense 3-D polylines (k, 3): the
+    points of each measured to the other polyline, both ways (not below either's distance to the other
+    surface, on which the other edge lies); the length is edge a's."""
+    d = np.concatenate([_to_polyline(ea, eb), _to_polyline(eb, ea)])
     length = float(np.linalg.norm(np.diff(ea, axis=0), axis=1).sum())
     return float(d.max()), float(np.percentile(d, 95)), len(d), length
 
