@@ -335,9 +335,9 @@ def _moved_end(piece, point, at_end: bool):
 
 
 def _face_from_loops(face, tol):
-    """TopoDS_Face of a TrimmedFace: edges from pcurves, 3-D curves derived, wires and orientation fixed."""
+    """TopoDS_Face of a TrimmedFace: edges from pcurves, 3-D curves derived (`_edge_on_surface`), wires and
+    orientation fixed."""
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge, BRepBuilderAPI_MakeFace
-    from OCP.BRepLib import BRepLib
     from OCP.ShapeFix import ShapeFix_Face, ShapeFix_Wire
 
     surf = surface_geom(face.surface)
@@ -352,9 +352,7 @@ def _face_from_loops(face, tol):
             mk = BRepBuilderAPI_MakeEdge(c2, surf, t0, t1)
             if not mk.IsDone():
                 raise BackendError(f"{_label(face)}: could not build an edge from a trimming curve")
-            edge = mk.Edge()
-            BRepLib.BuildCurves3d_s(edge, PRECISION)
-            edges.append(edge)
+            edges.append(_edge_on_surface(mk.Edge(), c2, surf, t0, t1))
         wires.append(_wire(edges))
     mk = BRepBuilderAPI_MakeFace(surf, wires[0], True)
     for w in wires[1:]:
@@ -368,6 +366,45 @@ def _face_from_loops(face, tol):
     fix.FixOrientationMode = 1
     fix.Perform()
     return fix.Face()
+
+
+def _off_surface(edge, c2, surf, t0: float, t1: float, m: int) -> float:
+    """Largest distance (model units) at m parameters between an edge's 3-D curve and its pcurve on `surf`."""
+    from OCP.BRep import BRep_Tool
+
+    c3 = BRep_Tool.Curve_s(edge, 0.0, 0.0)
+    worst = 0.0
+    for t in np.linspace(t0, t1, m):
+        uv = c2.Value(float(t))
+        worst = max(worst, surf.Value(uv.X(), uv.Y()).Distance(c3.Value(float(t))))
+    return worst
+
+
+def _edge_on_surface(edge, c2, surf, t0: float, t1: float):
+    """The edge of pcurve c2 on `surf` with its 3-D curve derived (``BRepLib::BuildCurves3d``). Across a
+    densely knotted B-spline surface (a fitted patch) OpenCASCADE's default approximation can leave that
+    curve far off the surface, silently (0.4 mm on an 80 x 80 net; the face is then refused, or written with
+    a bloated tolerance): there it is measured at a few points per knot span, and approximated again in
+    more segments, up to 8 per knot line it may cross, until it lies within 10 x the precision."""
+    from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeEdge
+    from OCP.BRepLib import BRepLib
+    from OCP.GeomAbs import GeomAbs_C1
+
+    BRepLib.BuildCurves3d_s(edge, PRECISION)
+    if not hasattr(surf, "NbUKnots"):
+        return edge
+    lines = surf.NbUKnots() + surf.NbVKnots()
+    m = 4 * lines + 33
+    best, off = edge, _off_surface(edge, c2, surf, t0, t1, m)
+    for segments in (2 * lines, 4 * lines, 8 * lines):
+        if off <= 10 * PRECISION:
+            break
+        again = BRepBuilderAPI_MakeEdge(c2, surf, t0, t1).Edge()
+        BRepLib.BuildCurves3d_s(again, PRECISION, GeomAbs_C1, 14, segments)
+        d = _off_surface(again, c2, surf, t0, t1, m)
+        if d < off:
+            best, off = again, d
+    return best
 
 
 def _wires_of(shape):
