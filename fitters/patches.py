@@ -48,8 +48,9 @@ merged views of a closed or wrapped part:
    still meets its own certificate. The set is shared and measured again (the seams shared before and
    those still over the tolerance are intersected again; a seam brought within it keeps separate trims,
    measured: intersections are most of the cost, and surfaces pulled together meet ill-conditioned); each
-   group of patches linked by loose seams keeps its refit only if its seams do better, and the set is
-   kept if it brings more seams within the tolerance. A patch with a shared edge is also held to that
+   group of patches linked by loose seams keeps its refit only if its seams do better, then a refitted
+   patch whose own seams do worse is put back (a group spans most of a part), and the set is kept if it
+   brings more seams within the tolerance. A patch with a shared edge is also held to that
    edge: samples of the current intersection (`_shared_stretch`) are anchors at each surface's own
    parameters of it, so the re-intersected edge stays near where it was and OpenCASCADE's exact intersection
    still closes the face (unheld, pulled along a band at its other seams, it did not).
@@ -59,9 +60,9 @@ merged views of a closed or wrapped part:
    loops), the shared intersections kept as they were; the set is kept if it scores better. YCB mustard
    bottle at 1 mm: all 21 seams within, worst 0.95 mm, 3 shared (20 within, worst 1.23 mm at the wrap
    halves, 4 shared, with such patches refitted without anchors; 16 within, worst 1.48 mm, with a plain
-   refit at half the tolerance); potted meat can: 28 of 42 within, 5 intersections and 2 seam curves
-   shared, worst 3.17 mm at a short corner seam (26 of 42 without seam curves; 25 of 41, worst 4.45 mm,
-   with the refit unheld).
+   refit at half the tolerance); potted meat can: 29 of 42 within, 6 intersections and 2 seam curves
+   shared, worst 3.17 mm at a short corner seam (28 with each linked group's refit kept or dropped as a
+   whole; 26 of 42 without seam curves; 25 of 41, worst 4.45 mm, with the refit unheld).
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
@@ -405,9 +406,10 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     where that holds (each surface then nearer the crease's data that both approximate, so nearer each
     other, or crossing where they did not), else at `tol`. The refitted set is shared and measured
     again; each group of patches linked by seams over `tol` keeps its refit only if the seams it
-    touches score better (`_score`), and the whole set is kept when it scores better. Last, the seams still
-    over `tol` may share one curve midway between their surfaces (`with_curves`, kept if it scores better).
-    Returns (patches with their shared loops, gaps)."""
+    touches score better (`_score`), then each refitted patch whose own seams score worse goes back to its
+    plain fit (kept if the set then scores better), and the whole set is kept when it scores better. Last,
+    the seams still over `tol` may share one curve midway between their surfaces (`with_curves`, kept if
+    it scores better). Returns (patches with their shared loops, gaps)."""
     from scipy.sparse.csgraph import connected_components
 
     from rgm.fitters.shared_edges import share_boundaries
@@ -479,18 +481,31 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     keep = list(again)
     for c in np.unique(group[loose]):
         mine = set(np.nonzero(group == c)[0])
-        touches = lambda gaps: [g for g in gaps if g.i in mine or g.j in mine]   # noqa: E731
         # the refit may add or lose a seam: each set is scored on its own seams of the group
-        if _score(touches(new_gaps), tol) <= _score(touches(old_gaps), tol):
+        if _score(_touching(new_gaps, mine), tol) <= _score(_touching(old_gaps, mine), tol):
             for r in mine:
                 keep[r] = plain[r]
     if any(a is not b for a, b in zip(keep, again)):
         if all(a is b for a, b in zip(keep, plain)):
             return with_curves(plain, patches, old_gaps)
         new_gaps, shared = share(keep, old_gaps)
+    # within the set, a refitted patch whose own seams do worse than before goes back to its plain fit (a
+    # group spans most patches of a part: its verdict is coarse)
+    worse = [r for r in loose if keep[r] is not plain[r] and _score(_touching(new_gaps, {r}), tol)
+             < _score(_touching(old_gaps, {r}), tol)]
+    if worse and len(worse) < sum(a is not b for a, b in zip(keep, plain)):
+        finer = [plain[r] if r in worse else q for r, q in enumerate(keep)]
+        finer_gaps, finer_shared = share(finer, old_gaps)
+        if _score(finer_gaps, tol) > _score(new_gaps, tol):
+            keep, new_gaps, shared = finer, finer_gaps, finer_shared
     if _score(new_gaps, tol) <= _score(old_gaps, tol):
         return with_curves(plain, patches, old_gaps)
     return with_curves(keep, shared, new_gaps)
+
+
+def _touching(gaps, patches: set) -> list:
+    """The gaps of seams with a patch in `patches`."""
+    return [g for g in gaps if g.i in patches or g.j in patches]
 
 
 def _shared_stretch(cache, pair, fits, spacing: float):
