@@ -50,7 +50,8 @@ merged views of a closed or wrapped part:
    measured: intersections are most of the cost, and surfaces pulled together meet ill-conditioned); each
    group of patches linked by loose seams keeps its refit only if its seams do better, then a refitted
    patch whose own seams do worse is put back (a group spans most of a part), and the set is kept if it
-   brings more seams within the tolerance. A patch with a shared edge is also held to that
+   brings more seams within the tolerance; while it does, the seams still over the tolerance get another
+   round, from the set kept (`_ROUNDS`, nets capped at 4 times their first size). A patch with a shared edge is also held to that
    edge: samples of the current intersection (`_shared_stretch`) are anchors at each surface's own
    parameters of it, so the re-intersected edge stays near where it was and OpenCASCADE's exact intersection
    still closes the face (unheld, pulled along a band at its other seams, it did not).
@@ -60,9 +61,10 @@ merged views of a closed or wrapped part:
    loops), the shared intersections kept as they were; the set is kept if it scores better. YCB mustard
    bottle at 1 mm: all 21 seams within, worst 0.95 mm, 3 shared (20 within, worst 1.23 mm at the wrap
    halves, 4 shared, with such patches refitted without anchors; 16 within, worst 1.48 mm, with a plain
-   refit at half the tolerance); potted meat can: 29 of 42 within, 6 intersections and 2 seam curves
-   shared, worst 3.17 mm at a short corner seam (28 with each linked group's refit kept or dropped as a
-   whole; 26 of 42 without seam curves; 25 of 41, worst 4.45 mm, with the refit unheld).
+   refit at half the tolerance); potted meat can: 36 of 43 within, 5 intersections and a seam curve
+   shared, worst 3.38 mm (29 of 42, worst 3.17 mm, after one refit round, 32 after two; 28 with each
+   linked group's refit kept or dropped as a whole; 26 without seam curves; 25 of 41 with the refit
+   unheld).
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
@@ -90,6 +92,7 @@ _FIRST = 0.5            # the first refit is at this share of the tolerance (`fi
 _WITHIN = ("refitted through a common boundary curve with its neighbour: the separate trims are measured (surfaces "
            "pulled together along a band are not intersected)")
 _ANCHOR_TOL = 0.25      # anchors are met within this share of the seam tolerance (`seam_anchors`)
+_ROUNDS = 3              # anchored refit rounds at most (`_share_and_refit`)
 
 
 def _points(points) -> np.ndarray:
@@ -407,11 +410,10 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     other, or crossing where they did not), else at `tol`. The refitted set is shared and measured
     again; each group of patches linked by seams over `tol` keeps its refit only if the seams it
     touches score better (`_score`), then each refitted patch whose own seams score worse goes back to its
-    plain fit (kept if the set then scores better), and the whole set is kept when it scores better. Last,
+    plain fit (kept if the set then scores better), and the whole set is kept when it scores better;
+    rounds go on from the set kept while one scores better, at most _ROUNDS (`_refit_round`). Last,
     the seams still over `tol` may share one curve midway between their surfaces (`with_curves`, kept if
     it scores better). Returns (patches with their shared loops, gaps)."""
-    from scipy.sparse.csgraph import connected_components
-
     from rgm.fitters.shared_edges import share_boundaries
 
     near = 5 * spacing
@@ -446,9 +448,24 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
 
     plain = [PatchFit(q.indices, q.base, q.shape, q.seconds, q.params) for q in patches]
     old_gaps = share_boundaries(points, patches, gaps, tol, near, spacing, cache)   # shares into `patches`
+    sizes = [q.shape.fit.n_ctrl for q in plain]
+    fits, result, gaps = plain, patches, old_gaps
+    for _ in range(_ROUNDS):
+        if not any(g.max > tol for g in gaps):
+            return result, gaps
+        better = _refit_round(points, fits, gaps, share, cache, sizes, tol, statistic, max_ctrl, near, spacing)
+        if better is None:
+            break
+        fits, result, gaps = better
+    return with_curves(fits, result, gaps)
+
+
+def _refit_round(points, plain, old_gaps, share, cache, sizes, tol, statistic, max_ctrl, near, spacing):
+    """One anchored refit of the patches of the seams over `tol` (`_share_and_refit`): `plain` the fits
+    (their own data loops), `old_gaps` their shared gaps, `share(fits, before)` shares and measures a set;
+    nets grow to at most _GROWTH times `sizes` (the first fits'). Returns (fits, shared patches, gaps)
+    when the refit scores better, else None."""
     over = [(g.i, g.j) for g in old_gaps if g.max > tol]
-    if not over:
-        return patches, old_gaps
     loose = sorted({r for pair in over for r in pair})
     # a shared edge is kept where it is: the refitted surface is held to it too (unheld, pulled along a band
     # at its other seams, its re-intersected edge came out where OpenCASCADE's exact intersection would not
@@ -460,9 +477,9 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
     again = list(plain)
     for r in loose:
         q = plain[r]
-        # the net may grow to meet the anchors, to _GROWTH times its size (no net as dense as the data,
-        # wiggling between anchors it cannot all meet)
-        cap = min(max_ctrl, max(_GROWTH * q.shape.fit.n_ctrl, 100))
+        # the net may grow to meet the anchors, to _GROWTH times its first size (no net as dense as the
+        # data, wiggling between anchors it cannot all meet)
+        cap = min(max_ctrl, max(_GROWTH * sizes[r], 100))
         for at in (_FIRST * tol, tol):   # tighter first, the tolerance if not
             try:
                 fit = _fit_patch(points, q.indices, q.base, q.params, at, statistic, cap, anchors.get(r))
@@ -472,7 +489,7 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
                 again[r] = fit
                 break
     if all(a is b for a, b in zip(again, plain)):
-        return with_curves(plain, patches, old_gaps)
+        return None
     new_gaps, shared = share(again, old_gaps)
     # each group of patches linked by seams over the tolerance keeps its refit if its seams do better
     pairs = np.array(over).T
@@ -487,7 +504,7 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
                 keep[r] = plain[r]
     if any(a is not b for a, b in zip(keep, again)):
         if all(a is b for a, b in zip(keep, plain)):
-            return with_curves(plain, patches, old_gaps)
+            return None
         new_gaps, shared = share(keep, old_gaps)
     # within the set, a refitted patch whose own seams do worse than before goes back to its plain fit (a
     # group spans most patches of a part: its verdict is coarse)
@@ -499,8 +516,8 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
         if _score(finer_gaps, tol) > _score(new_gaps, tol):
             keep, new_gaps, shared = finer, finer_gaps, finer_shared
     if _score(new_gaps, tol) <= _score(old_gaps, tol):
-        return with_curves(plain, patches, old_gaps)
-    return with_curves(keep, shared, new_gaps)
+        return None
+    return keep, shared, new_gaps
 
 
 def _touching(gaps, patches: set) -> list:
