@@ -51,10 +51,11 @@ merged views of a closed or wrapped part:
    group of patches linked by loose seams keeps its refit only if its seams do better, then a refitted
    patch whose own seams do worse is put back (a group spans most of a part), and the set is kept if it
    brings more seams within the tolerance; while it does, the seams still over the tolerance get another
-   round, from the set kept (`_ROUNDS`, nets capped at 4 times their first size). A patch with a shared edge is also held to that
-   edge: samples of the current intersection (`_shared_stretch`) are anchors at each surface's own
-   parameters of it, so the re-intersected edge stays near where it was and OpenCASCADE's exact intersection
-   still closes the face (unheld, pulled along a band at its other seams, it did not).
+   round, from the set kept (`_ROUNDS`, nets capped at 4 times their first size). A patch with a shared
+   edge is also held to that edge: samples of the current intersection (`_shared_stretch`) are anchors at
+   each surface's own parameters of it, so the re-intersected edge stays near where it was and
+   OpenCASCADE's exact intersection still closes the face (unheld, pulled along a band at its other seams,
+   it did not).
    Last, the seams still over the tolerance whose surfaces do not cross along them (meeting tangentially,
    stopping short, crossing elsewhere) are shared as one curve midway between the two surfaces where one
    lies within the tolerance of both (`rgm.fitters.seam_curves`: `seam_i_j := bspline(...)` in both
