@@ -62,10 +62,9 @@ merged views of a closed or wrapped part:
    loops), the shared intersections kept as they were; the set is kept if it scores better. YCB mustard
    bottle at 1 mm: all 21 seams within, worst 0.95 mm, 3 shared (20 within, worst 1.23 mm at the wrap
    halves, 4 shared, with such patches refitted without anchors; 16 within, worst 1.48 mm, with a plain
-   refit at half the tolerance); potted meat can: 36 of 43 within, 5 intersections and a seam curve
-   shared, worst 3.38 mm (29 of 42, worst 3.17 mm, after one refit round, 32 after two; 28 with each
-   linked group's refit kept or dropped as a whole; 26 without seam curves; 25 of 41 with the refit
-   unheld).
+   refit at half the tolerance); potted meat can: 33 of 42 within, 5 intersections shared, worst
+   2.66 mm (29 of 42, worst 3.17 mm, after one refit round; 28 with each linked group's refit kept or
+   dropped as a whole; 25 of 41 with the refit unheld).
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
