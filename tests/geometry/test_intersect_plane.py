@@ -122,3 +122,53 @@ def test_a_march_that_enters_another_loop_stops_after_one_turn():
     branches = intersect_surface_plane(surface, origin, normal, 1e-4)
     assert branches and oracle_error(surface, origin, normal, branches) <= 1e-4 * (1 + 1e-6)
     assert max(br.curve.n for br in branches) < 1000      # each branch marched once round, not 100,000 steps
+
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rational=st.booleans(), sag=st.sampled_from([0.05, 0.2]))
+def test_a_march_refined_in_place_stays_on_the_intersection_and_never_folds(seed, rational, sag):
+    """`_subdivide`: a branch marched at a coarse step, its intervals halved with the midpoints projected
+    onto the intersection, either meets a tighter tolerance with every point still in order along the
+    branch (consecutive chords never turn back: no fold), within it by the oracle (closest points on the
+    surface, the plane's signed distance), or declines (None: the branch is marched again)."""
+    from rgm.geometry.intersect import (IntersectionBranch, _PlaneProblem, _fit_branch, _measure, _newton_min_norm,
+                                        _subdivide, _trace)
+
+    surface = random_patch(seed, rational)
+    origin = surface.evaluate(np.array([0.5]), np.array([0.5]))[0]
+    normal = np.array([0.3, -0.2, 1.0])
+    problem = _PlaneProblem(surface, origin, normal)
+    x0 = _newton_min_norm(problem, np.array([[0.5, 0.5]]), 1e-12)[0][0]
+    xs, closed = _trace(problem, x0, sag, 2.0, 1e-12)
+    coarse = _measure(problem, *_fit_branch(problem, xs, closed, 2))
+    tol = coarse / 4
+    refined = _subdivide(problem, xs, closed, 1e-12, tol)
+    if refined is None:
+        return
+    (curve, uv_a, _, t), err = refined
+    assert err <= tol / 2 and len(t) > len(xs)
+    pts = surface.evaluate(*uv_a.evaluate(t).T)
+    chords = np.diff(pts, axis=0)
+    assert np.all(np.einsum("ij,ij->i", chords[1:], chords[:-1]) > 0)
+    assert oracle_error(surface, origin, normal, [IntersectionBranch(curve, uv_a, None, err, closed)]) <= tol
+
+
+def test_a_march_refined_in_place_meets_the_tolerance_a_finer_march_would():
+    """The case `_subdivide` is for: a branch within a few times the tolerance, refined instead of
+    marched again, within tol / 2 by its own measure and within tol by the oracle."""
+    from rgm.geometry.intersect import (IntersectionBranch, _PlaneProblem, _fit_branch, _measure, _newton_min_norm,
+                                        _subdivide, _trace)
+
+    surface = random_patch(7, False)
+    origin = surface.evaluate(np.array([0.5]), np.array([0.5]))[0]
+    normal = np.array([0.3, -0.2, 1.0])
+    problem = _PlaneProblem(surface, origin, normal)
+    x0 = _newton_min_norm(problem, np.array([[0.5, 0.5]]), 1e-12)[0][0]
+    xs, closed = _trace(problem, x0, 0.05, 2.0, 1e-12)
+    coarse = _measure(problem, *_fit_branch(problem, xs, closed, 2))
+    refined = _subdivide(problem, xs, closed, 1e-12, coarse / 4)
+    assert refined is not None
+    (curve, uv_a, _, t), err = refined
+    assert err <= coarse / 8
+    assert oracle_error(surface, origin, normal, [IntersectionBranch(curve, uv_a, None, err, closed)]) <= coarse / 4
