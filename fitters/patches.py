@@ -21,12 +21,12 @@ merged views of a closed or wrapped part:
    axis), or failing that across its longest extent. Both parameters are scaled to [0, 1]², then into
    [m, 1 - m] (`reach_past`) so that the surface reaches 5 point spacings past its data on every side.
 3. Each patch is fitted by `fit_freeform` with those parameters (least squares, knot insertion to the
-   tolerance, trimming loops from the occupied cells of (u, v)). A piece whose fit stops at the
-   approximation limit with the tolerance unmet (its projection folds, or it spans faces a crease too
-   soft to find divides) is split in two across its longest extent, each half parameterised again, to
-   `_RESPLIT` splits; the halves are kept if every one holds (`_fit_piece`). YCB meat can, views with
-   seeds 2-4: every patch now holds (before, pieces of the lid's corner did not), and 29-33 seams of
-   40-53 are within 1 mm (20-24 of 34-44 before).
+   tolerance, trimming loops from the occupied cells of (u, v)). A piece whose fit stops at a limit
+   (approximation or control net) with the tolerance unmet (its projection folds, or it spans faces a
+   crease too soft to find divides) is split in two across its longest extent, each half parameterised
+   again, to `_RESPLIT` splits; the halves are kept if every one holds (`_fit_piece`). YCB meat can,
+   views with seeds 2-4: every patch now holds (before, pieces of the lid's corner did not), and 29-33
+   seams of 40-53 are within 1 mm (20-24 of 34-44 before).
 4. Neighbouring patches share their boundary curve (`rgm.fitters.shared_edges`): the piece of each face's
    trimming loop along the crease with a neighbour becomes the same described intersection,
    `intersect(surface_i, surface_j)`, one binding used by both loops, joined to the rest of each loop
@@ -393,7 +393,7 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
 
 def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, skipped, depth=_RESPLIT) -> list:
     """The PatchFits of one piece of a patch (`fit_patches`), parameterised by `uv` (u, v) over `base`:
-    one, or, where no surface over those parameters meets `tol` within the approximation limit (the
+    one, or, where no surface over those parameters meets `tol` within the limits of `fit_freeform` (the
     projection folds, or the piece spans faces that a crease too soft to find divides), the fits of its
     two halves across its longest extent, each parameterised again, to `depth` splits, kept only if
     every one of them holds. Pieces under 16 points are left out, fits that fail said in `skipped`."""
