@@ -331,13 +331,12 @@ def _curve3(curve):
 def _directed(edge, nurbs, uv_before):
     """A seam curve's (text, model curve) as a loop piece after a piece ending at `uv_before` on surface
     `nurbs`: `reverse(...)` when the loop meets it at its end."""
+    from rgm.fitters.seam_curves import meets_start
     from rgm.model import BSplineCurve
 
     text, curve = edge
     c = curve.nurbs()
-    here = nurbs.evaluate(*np.asarray(uv_before, float)[:, None])[0]
-    tips = c.evaluate(np.array(c.domain, float))
-    if np.linalg.norm(here - tips[0]) <= np.linalg.norm(here - tips[1]):
+    if meets_start(nurbs, uv_before, c):
         return edge
     return f"reverse({text})", BSplineCurve(c.reverse())
 

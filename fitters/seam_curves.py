@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from rgm.errors import GeometryError
 
-__all__ = ["seam_curve", "measure_curve", "curve_edge"]
+__all__ = ["seam_curve", "measure_curve", "curve_edge", "meets_start"]
 
 _ROUNDS = 8         # alternating closest-point rounds
 _FIT = 20           # the curve is fitted to tol / _FIT
@@ -55,6 +55,14 @@ def curve_edge(surface, curve, m: int = _SAMPLES):
 
     u, v, _, d = closest_point_surface(surface, curve.evaluate(np.linspace(*curve.domain, m)))
     return np.c_[u, v], np.asarray(d)
+
+
+def meets_start(surface, uv, curve) -> bool:
+    """Whether a face's loop arriving at uv (2,) on `surface` (NurbsSurface) meets the 3-D seam `curve`
+    (NurbsCurve) at its start (nearer C(t0) than C(t1)), so runs it forwards."""
+    here = surface.evaluate(*np.asarray(uv, float)[:, None])[0]
+    tips = curve.evaluate(np.array(curve.domain, float))
+    return bool(np.linalg.norm(here - tips[0]) <= np.linalg.norm(here - tips[1]))
 
 
 def seam_curve(i: int, j: int, shapes, loops, runs, tol: float, near: float, spacing: float):

@@ -510,6 +510,7 @@ def snap_joins(shapes, surfaces, curves=None) -> list:
     closest points on its printed surface of the curve's ends, where the back ends start its edge."""
     from rgm.fitters.freeform_part import FreeformShape
     from rgm.geometry.intersect import _newton_min_norm, _SurfaceProblem
+    from rgm.fitters.seam_curves import meets_start
     from rgm.geometry.inversion import closest_point_surface
 
     curves = curves or {}
@@ -528,8 +529,7 @@ def snap_joins(shapes, surfaces, curves=None) -> list:
             for k in (i, j):
                 before, after = joins(k, (i, j))
                 u, v = closest_point_surface(surfaces[k], tips)[:2]
-                here = surfaces[k].evaluate(*np.asarray(outer[k][before].ctrl[-1], float)[:, None])[0]
-                first, last = (0, 1) if np.linalg.norm(here - tips[0]) <= np.linalg.norm(here - tips[1]) else (1, 0)
+                first, last = (0, 1) if meets_start(surfaces[k], outer[k][before].ctrl[-1], c) else (1, 0)
                 for index, end, tip in ((before, -1, first), (after, 0, last)):
                     ctrl = outer[k][index].ctrl.copy()
                     ctrl[end] = (u[tip], v[tip])
