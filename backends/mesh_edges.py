@@ -14,7 +14,7 @@ import numpy as np
 
 from rgm.errors import BackendError
 
-from .mesh_surface import Patch
+from .mesh_surface import Patch, evaluate_together, project_together
 
 #: sampled chords must be within CERTIFY * tol: the margin covers the maximum falling between samples
 CERTIFY = 0.98
@@ -38,43 +38,33 @@ class Piece:
 def uv_of(pieces, params) -> list:
     """[uv (k_i, 2)] of pieces[i] at parameters params[i] (k_i,) (clipped into [0, 1]). Pieces that
     follow a 3-D curve's closest points on their patch (`rgm.backends.mesh_faces._Projected`) are
-    projected together, one Gauss-Newton run per patch for all of them: a part's trimming curves
-    would otherwise cost one run per piece and call."""
+    projected together, one Gauss-Newton run for all of them on each stack of patches
+    (`rgm.backends.mesh_surface.project_together`): a part's trimming curves would otherwise cost one run
+    per piece and call."""
     from .mesh_faces import ITERATIONS, _Projected
 
     params = [np.clip(np.asarray(s, float), 0.0, 1.0) for s in params]
     out = [None] * len(pieces)
-    batches = {}
+    projected = []
     for i, p in enumerate(pieces):
         if isinstance(p.uv, _Projected):
-            batches.setdefault(id(p.uv.patch), []).append(i)
+            projected.append(i)
         else:
             out[i] = p.uv(params[i])
-    for idx in batches.values():
-        starts = [pieces[i].uv.start(params[i]) for i in idx]
-        uv, dist = pieces[idx[0]].uv.patch.project(np.concatenate([x for x, _ in starts]),
-                                                   np.concatenate([g for _, g in starts]), iterations=ITERATIONS)
-        cut = np.cumsum([len(params[i]) for i in idx[:-1]])
-        for i, (x, _), u, d in zip(idx, starts, np.split(uv, cut), np.split(dist, cut)):
-            out[i] = pieces[i].uv.finish(params[i], x, u, d)
+    starts = [pieces[i].uv.start(params[i]) for i in projected]
+    found = project_together([pieces[i].uv.patch for i in projected], [x for x, _ in starts], [g for _, g in starts],
+                             ITERATIONS)
+    for i, (x, _), (u, d) in zip(projected, starts, found):
+        out[i] = pieces[i].uv.finish(params[i], x, u, d)
     return out
 
 
 def xyz_of(pieces, params) -> list:
     """[xyz (k_i, 3)] of pieces[i] at parameters params[i] (k_i,): the (u, v) of all pieces (`uv_of`),
-    and those on one surface (`Patch.whole`: sub-patches between creases share their surface's)
-    evaluated in one call rather than one call per piece, which is what small models spend their time on."""
-    uv = uv_of(pieces, params)
-    groups = {}
-    for i, p in enumerate(pieces):
-        groups.setdefault(id(p.patch.whole), []).append(i)
-    out = [None] * len(pieces)
-    for idx in groups.values():
-        every = np.concatenate([uv[i] for i in idx])
-        xyz = pieces[idx[0]].patch.whole.evaluate(every[:, 0], every[:, 1])
-        for i, part in zip(idx, np.split(xyz, np.cumsum([len(uv[i]) for i in idx[:-1]]))):
-            out[i] = part
-    return out
+    evaluated together (`rgm.backends.mesh_surface.evaluate_together`: sub-patches between creases share
+    their surface's evaluation, NURBS patches of one kind are stacked) rather than one call per piece,
+    which is what small models spend their time on."""
+    return evaluate_together([p.patch for p in pieces], uv_of(pieces, params))
 
 
 def _cut(a, b, k) -> np.ndarray:

@@ -142,6 +142,7 @@ def _project_onto(pieces, patch, tol):
         uv[redo], dist[redo] = patch.closest(x[redo], grid=32)
     m = len(probe)
     tables = {k: (uv[i * m:(i + 1) * m], dist[i * m:(i + 1) * m]) for i, k in enumerate(curves)}
+    extents = {k: float(np.ptp(x[i * m:(i + 1) * m], axis=0).max()) for i, k in enumerate(curves)}
     sides = {}
     for k, (uv, _) in tables.items():
         for axis, lo, hi in seams:
@@ -158,8 +159,8 @@ def _project_onto(pieces, patch, tol):
         if isinstance(c, NurbsCurve):
             seam_sides = [(a, lo, hi, sides[k, a]) for a, lo, hi in seams]
             uv, dist = tables[k]
-            pieces[k] = Piece(patch, _Projected(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist),
-                              _knot_breaks(c, *c.domain))
+            pieces[k] = Piece(patch, _Projected(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist,
+                                                extents[k]), _knot_breaks(c, *c.domain))
 
 
 def _on_sides(uv, s, seams):
@@ -176,18 +177,17 @@ class _Projected:
     seam sides chosen (`_on_sides`). The closest points at equally spaced parameters (`table_uv`, at
     distances `table_dist`: how far the curve lies off the surface) are interpolated as Gauss-Newton's
     guesses, so the many small calls of edge sampling are local refinements; a point that ends farther
-    from the surface than twice the table's worst (plus 1e-9 of the table's extent) is searched
+    from the surface than twice the table's worst (plus 1e-9 of the curve's `extent`) is searched
     globally. Called as a function; `rgm.backends.mesh_edges.uv_of` runs the Gauss-Newton steps of all
     the pieces on one patch together (`start`, one `Patch.project`, `finish`)."""
 
-    def __init__(self, patch, curve, seams, table_uv, table_dist):
+    def __init__(self, patch, curve, seams, table_uv, table_dist, extent: float):
         self.patch, self.seams = patch, seams
         self.t0, self.t1 = curve.domain
         self.at = _points_of(curve)
         self.table_uv = table_uv
         self.probe = np.linspace(0.0, 1.0, len(table_uv))
-        extent = np.ptp(patch.evaluate(table_uv[:, 0], table_uv[:, 1]), axis=0).max()
-        self.limit = 2 * float(table_dist.max()) + 1e-9 * float(extent)
+        self.limit = 2 * float(table_dist.max()) + 1e-9 * extent
 
     def start(self, s):
         """(points (k, 3) of the curve, parameter guesses (k, 2)) at s (k,)."""

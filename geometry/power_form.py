@@ -17,7 +17,7 @@ import numpy as np
 
 from rgm.geometry.basis import basis_derivatives_t
 
-__all__ = ["power_form"]
+__all__ = ["power_form", "SurfaceStack", "key"]
 
 #: highest degree converted to the per-span power form (the Taylor form is as accurate as the exact
 #: evaluators up to it, tested); higher degrees use the exact evaluators
@@ -154,34 +154,105 @@ class _SurfacePower:
 
     def d(self, u, v, order):
         """Points (m, 3) and, for order 1, the partials Su, Sv (m, 3) (blocks of _POWER_CHUNK)."""
-        u, v = np.asarray(u, float), np.asarray(v, float)
-        if len(u) <= _POWER_CHUNK:
-            return self._block(u, v, order)
-        parts = [self._block(u[s:s + _POWER_CHUNK], v[s:s + _POWER_CHUNK], order)
-                 for s in range(0, len(u), _POWER_CHUNK)]
-        return tuple(None if parts[0][i] is None else np.concatenate([b[i] for b in parts]) for i in range(3))
+        return _in_blocks(self._block, (np.asarray(u, float), np.asarray(v, float)), order)
 
     def _block(self, u, v, order):
-        """`d` on one block. The coefficients are gathered point-last, (a, b, c, m): every Horner step
-        is then one pass over contiguous rows of m values (point-first, a step loops over short rows
-        of (b, c) per point, about twice the time from a few hundred points on)."""
+        """`d` on one block."""
         ku, xu, iu = self.spans_u.locate(u)
         kv, xv, iv = self.spans_v.locate(v)
-        p, q = self.p, self.q
-        c = self.flat_t.take(ku * self.nsv + kv, axis=1).reshape(p + 1, q + 1, self.nc, len(u))
-        row = _horner(c, xu, p)                                      # in u: (b, c, m)
-        h = _horner(row, xv, q)                                      # (c, m)
-        pt = h[:3] / h[3] if self.rational else h
-        if not order:
-            return pt.T, None, None
-        hu = _horner(_horner_d(c, xu, p), xv, q)
-        hv = _horner_d(row, xv, q)
-        hu *= iu
-        hv *= iv
-        if self.rational:
-            w = h[3]
-            return pt.T, ((hu[:3] - hu[3] * pt) / w).T, ((hv[:3] - hv[3] * pt) / w).T
-        return pt.T, hu.T, hv.T
+        return _pairs(self, ku * self.nsv + kv, xu, iu, xv, iv, order)
+
+
+def _in_blocks(block, args, order):
+    """block(*args, order) over blocks of _POWER_CHUNK parameters (the gathered coefficients stay in
+    cache), the three results concatenated."""
+    if len(args[0]) <= _POWER_CHUNK:
+        return block(*args, order)
+    parts = [block(*(a[s:s + _POWER_CHUNK] for a in args), order) for s in range(0, len(args[0]), _POWER_CHUNK)]
+    return tuple(None if parts[0][i] is None else np.concatenate([b[i] for b in parts]) for i in range(3))
+
+
+def _pairs(form, cols, xu, iu, xv, iv, order):
+    """Points (m, 3) and, for order 1, Su, Sv of a surface power form (`_SurfacePower`, `SurfaceStack`)
+    at span pairs `cols` (m,) (columns of its flat_t), local x and reciprocal span lengths per direction.
+    The coefficients are gathered point-last, (a, b, c, m): every Horner step is then one pass over
+    contiguous rows of m values (point-first, a step loops over short rows of (b, c) per point, about
+    twice the time from a few hundred points on)."""
+    p, q = form.p, form.q
+    c = form.flat_t.take(cols, axis=1).reshape(p + 1, q + 1, form.nc, len(cols))
+    row = _horner(c, xu, p)                                      # in u: (b, c, m)
+    h = _horner(row, xv, q)                                      # (c, m)
+    pt = h[:3] / h[3] if form.rational else h
+    if not order:
+        return pt.T, None, None
+    hu = _horner(_horner_d(c, xu, p), xv, q)
+    hv = _horner_d(row, xv, q)
+    hu *= iu
+    hv *= iv
+    if form.rational:
+        w = h[3]
+        return pt.T, ((hu[:3] - hu[3] * pt) / w).T, ((hv[:3] - hv[3] * pt) / w).T
+    return pt.T, hu.T, hv.T
+
+
+class _StackedSpans:
+    """The `_Spans` of several surfaces in one direction, located together: parameter t of surface w is
+    keyed w + (t - lo_w) / (hi_w - lo_w) (times 1 - 1e-9, below the next surface's keys), and one
+    searchsorted over all surfaces' keyed inner breaks, less the count of the surfaces before w, gives
+    the span within w. Keys are computed alike for breaks and parameters, so a parameter on a break
+    lands on the span after it, as in `_Spans.locate`; the local x comes from w's own breaks."""
+
+    def __init__(self, spans):
+        self.lo = np.array([s.lo for s in spans])
+        self.hi = np.array([s.hi for s in spans])
+        self.scale = (1 - 1e-9) / (self.hi - self.lo)
+        counts = np.array([len(s.inner) for s in spans])
+        self.before = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self.keys = np.concatenate([w + (s.inner - s.lo) * self.scale[w] for w, s in enumerate(spans)])
+        self.first = np.concatenate([[0], np.cumsum(counts + 1)[:-1]])   # each surface's first span
+        self.mid = np.concatenate([s.mid for s in spans])
+        self.inv = np.concatenate([s.inv for s in spans])
+
+    def locate(self, which, t):
+        """(span within its surface (m,), local x (m,), 1 / span length (m,)) of t (m,) on surfaces `which`."""
+        lo = self.lo[which]
+        t = np.minimum(np.maximum(t, lo), self.hi[which])
+        k = np.searchsorted(self.keys, which + (t - lo) * self.scale[which], side="right") - self.before[which]
+        g = self.first[which] + k
+        inv = self.inv[g]
+        return k, (t - self.mid[g]) * inv, inv
+
+
+class SurfaceStack:
+    """Power forms of several surfaces of one kind (degrees, rational or not: `key`) evaluated in one
+    call, each point naming its surface: the many small surfaces of a part (a plate's holes) cost one
+    span lookup and one Horner pass, not one per surface."""
+
+    def __init__(self, forms):
+        first = forms[0]
+        if any(key(f) != key(first) for f in forms):
+            raise ValueError("a SurfaceStack holds surfaces of one degree pair and kind")
+        self.p, self.q, self.nc, self.rational = first.p, first.q, first.nc, first.rational
+        self.spans_u = _StackedSpans([f.spans_u for f in forms])
+        self.spans_v = _StackedSpans([f.spans_v for f in forms])
+        self.nsv = np.array([f.nsv for f in forms])
+        self.pair0 = np.concatenate([[0], np.cumsum([f.flat_t.shape[1] for f in forms])[:-1]])
+        self.flat_t = np.concatenate([f.flat_t for f in forms], axis=1)
+
+    def d(self, which, u, v, order):
+        """Points (m, 3) and, for order 1, Su, Sv (m, 3) of surfaces `which` (m,) at (u, v)."""
+        return _in_blocks(self._block, (np.asarray(which, np.intp), np.asarray(u, float), np.asarray(v, float)),
+                          order)
+
+    def _block(self, which, u, v, order):
+        ku, xu, iu = self.spans_u.locate(which, u)
+        kv, xv, iv = self.spans_v.locate(which, v)
+        return _pairs(self, self.pair0[which] + ku * self.nsv[which] + kv, xu, iu, xv, iv, order)
+
+
+def key(form) -> tuple:
+    """What surface power forms must share to be stacked (`SurfaceStack`): degrees and kind."""
+    return form.p, form.q, form.nc, form.rational
 
 
 def power_form(obj):

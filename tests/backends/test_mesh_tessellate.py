@@ -86,6 +86,40 @@ def test_power_form_evaluator_agrees_with_the_geometry_evaluator(seed, degree):
     assert np.abs(pts - c[0]).max() <= 1e-13 * 10 and np.abs(dv - c[1]).max() <= 1e-13 * (1 + np.abs(c[1]).max())
 
 
+@settings(max_examples=20, deadline=None, database=None)
+@given(seed=st.integers(0, 10_000), count=st.integers(1, 6))
+def test_stacked_patches_evaluate_and_project_as_each_does_alone(seed, count):
+    """Several NURBS patches of one kind evaluated and projected onto together (`PatchStack`: one span
+    lookup across their keyed knot vectors, `rgm.geometry.power_form.SurfaceStack`) give what each gives
+    alone: points bit for bit, on knots and inside; closest points to round-off (a stack stops its
+    Gauss-Newton steps when every patch's have converged, so a patch alone may stop a step earlier), also
+    on a patch restricted to a sub-rectangle of its surface (its own clamp box), with points on the
+    surface among those off it; unstackable patches (a revolution) are projected alone."""
+    from rgm.backends.mesh_surface import RevolutionPatch, evaluate_together, project_together
+
+    rng = np.random.default_rng(seed)
+    odd = 2 * rng.integers(0, 2) + 1     # all rational or all polynomial: one kind per stack
+    patches = [NurbsPatch(random_surface(odd + 2 * int(rng.integers(0, 5000)), n=int(rng.integers(4, 8))))
+               for _ in range(count)]
+    patches.append(patches[0].restrict(((0.2, 0.7), (0.1, 0.6))))
+    patches.append(RevolutionPatch(Revolution(Polyline([[1, 0, 0], [2, 0, 1], [2, 0, 3]]), [0, 0, 0], [0, 0, 1])))
+    uv = []
+    for p in patches:
+        (u0, u1), (v0, v1) = p.domain
+        k = int(rng.integers(1, 40))
+        uv.append(np.column_stack([rng.uniform(u0, u1, k), rng.uniform(v0, v1, k)]))
+        if isinstance(p, NurbsPatch):
+            uv[-1][0] = (p.breaks_u[1], p.breaks_v[-2])        # on knots
+    together = evaluate_together(patches, uv)
+    for p, a, b in zip(patches, uv, together):
+        assert np.array_equal(b, p.whole.evaluate(a[:, 0], a[:, 1]))
+    points = [x + rng.normal(0, 0.05, x.shape) * (rng.uniform(size=(len(x), 1)) < 0.7) for x in together]
+    guesses = [p.clamp(a + rng.normal(0, 0.02, a.shape)) for p, a in zip(patches, uv)]
+    for p, x, g, (got_uv, got_d) in zip(patches, points, guesses, project_together(patches, points, guesses, 4)):
+        want_uv, want_d = p.project(x, g, iterations=4)
+        assert np.abs(got_uv - want_uv).max() <= 1e-12 and np.abs(got_d - want_d).max() <= 1e-11
+
+
 def test_deviation_agrees_with_geometry_point_inversion():
     nurbs = random_surface(281)
     vertices, triangles = tessellate(BSplineSurface(nurbs), 0.1)
