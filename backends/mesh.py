@@ -120,27 +120,28 @@ class _FaceMesher:
         self.frame = plane_frame(face.patch, tol)
         self.interior = np.zeros((0, 2))
         if self.frame is None:
-            self._start()
+            face.grid = _grid(face.patch, tol)
         else:   # the grid only sets where the poles' samples fall
             face.grid = (np.unique(np.concatenate([face.patch.domain[0], face.patch.breaks_u])),
                          np.unique(np.concatenate([face.patch.domain[1], face.patch.breaks_v])))
-            self._boundary()
 
-    def _start(self):
-        """The initial grid (`_grid`) and the boundary on it: the grid points clear of the boundary, and
-        split requests for the boundary segments longer than LONGEST_SEGMENT grid cells."""
-        face = self.face
-        face.grid = _grid(face.patch, self.tol)
-        self._boundary()
-        gu, gv = face.grid
+    def start(self, found=None):
+        """Take up the boundary (`_boundary`, with `found` as `boundaries` gives it); on a face meshed in
+        (u, v), the initial grid points clear of the boundary and split requests for the boundary
+        segments longer than LONGEST_SEGMENT grid cells."""
+        self._boundary(found)
+        if self.frame is not None:
+            return
+        gu, gv = self.face.grid
         uu, vv = np.meshgrid(gu[1:-1], gv[1:-1], indexing="ij")
         self.interior = self._clear_of_boundary(np.column_stack([uu.ravel(), vv.ravel()]))
         p = self.scaled(self.b_uv)
         long = np.linalg.norm(p[self.segments[:, 1]] - p[self.segments[:, 0]], axis=1) > LONGEST_SEGMENT
         self.requests |= self._refs(np.flatnonzero(long))
 
-    def _boundary(self):
-        """Boundary samples (uv, vertex ids), loops and segments from the current edge sampling."""
+    def samples(self):
+        """The face's boundary samples on the current edge sampling: (pieces, parameters, vertex ids, edge
+        groups, rep indices, loops), the parameters each piece's, the rest per sample."""
         face, edges = self.face, self.edges
         params, ids, groups, reps, loops = [], [], [], [], []
         n0 = 0
@@ -155,7 +156,15 @@ class _FaceMesher:
                 n += len(s) - 1
             loops.append(n0 + np.arange(n))
             n0 += n
-        uvs = uv_of([p for loop in face.loops for p in loop], params)   # one projection for all pieces
+        return [p for loop in face.loops for p in loop], params, ids, groups, reps, loops
+
+    def _boundary(self, found=None):
+        """Boundary samples (uv, vertex ids), loops and segments from the current edge sampling; `found`:
+        (`samples`, their uv), as `boundaries` finds them for many faces at once."""
+        if found is None:
+            sampled = self.samples()
+            found = sampled, uv_of(*sampled[:2])    # one projection for all pieces
+        (_, _, ids, groups, reps, loops), uvs = found
         self.loops = loops
         self.segments = np.concatenate([np.column_stack([lp, np.roll(lp, -1)]) for lp in loops]).astype(np.int64)
         self.b_uv = np.concatenate(uvs)
@@ -171,9 +180,10 @@ class _FaceMesher:
         g, k = self.seg_group[segments], self.seg_rep[segments]
         return set(zip(g[g >= 0].tolist(), k[g >= 0].tolist()))
 
-    def refresh(self):
-        """Take up the current edge sampling (after this face or a neighbour split a shared edge)."""
-        self._boundary()
+    def refresh(self, found=None):
+        """Take up the current edge sampling (after this face or a neighbour split a shared edge);
+        `found` as for `_boundary`."""
+        self._boundary(found)
         if len(self.interior):
             p = self.scaled(self.b_uv)
             self.interior = self.interior[inside_loops(self.scaled(self.interior), [p[lp] for lp in self.loops])]
@@ -227,7 +237,8 @@ class _FaceMesher:
             if self._flat():
                 return
             self.frame = None
-            self._start()
+            self.face.grid = _grid(self.face.patch, self.tol)
+            self.start()
         patch, nb = self.face.patch, None
         for _ in range(MAX_PASSES):
             if self.requests:   # split the boundary segments that failed and take up the new sampling
@@ -385,6 +396,15 @@ def _uses_changed(mesher, edges) -> bool:
     return any(mesher.versions[g] != edges.version[g] for g in groups)
 
 
+def boundaries(meshers) -> list:
+    """[(samples, uv)] of every mesher's boundary on the current edge sampling (`_FaceMesher.samples`),
+    their (u, v) found by one `uv_of` for all faces' pieces (projections stacked across faces)."""
+    sampled = [m.samples() for m in meshers]
+    uvs = uv_of([p for s in sampled for p in s[0]], [t for s in sampled for t in s[1]])
+    cut = np.cumsum([len(s[0]) for s in sampled])
+    return [(s, uvs[a:b]) for s, a, b in zip(sampled, np.r_[0, cut[:-1]], cut)]
+
+
 def tessellate_faces(faces, tol: float, angle_tol: float | None = None, eps: float | None = None) -> Mesh:
     """Mesh face records (see `collect_faces`) to chordal deviation `tol` and normal deviation `angle_tol`."""
     if not tol > 0:
@@ -400,14 +420,16 @@ def tessellate_faces(faces, tol: float, angle_tol: float | None = None, eps: flo
                     for i in range(len(f.loops))])
         k += sum(len(l) for l in f.loops)
     meshers = [_FaceMesher(f, edges, pid, tol, angle_tol) for f, pid in zip(faces, ids)]
+    for m, found in zip(meshers, boundaries(meshers)):
+        m.start(found)
     for m in meshers:
         m.run()
     for _ in range(16):   # a face that split a shared edge changed its neighbours' boundaries: redo those
         stale = [m for m in meshers if _uses_changed(m, edges)]
         if not stale:
             break
-        for m in stale:
-            m.refresh()
+        for m, found in zip(stale, boundaries(stale)):
+            m.refresh(found)
             m.run()
     else:
         raise BackendError("the shared edges did not settle after 16 rounds of splitting")
