@@ -16,7 +16,7 @@ from rgm.errors import BackendError
 from rgm.geometry.power_form import power_form
 
 from .mesh_edges import Piece
-from .mesh_surface import Patch, surface_patch
+from .mesh_surface import Patch, closest_together, surface_patch
 
 
 @dataclass
@@ -74,8 +74,9 @@ def _intersection_pieces(patch, inter, surface, prev_end, next_start, tol):
     return _curve_piece(patch, uv)
 
 
-def _loop_pieces(loop, surface, patch, tol) -> list:
-    """Pieces of a trimming loop in the patch's (u, v)."""
+def _loop_start(loop, surface, patch) -> list:
+    """A trimming loop's pieces as far as they need no projection: 3-D curves (off a plane) left as
+    NurbsCurves for `_project_onto`, lazy intersections for `_loop_finish`."""
     from rgm.model import IntersectionCurve, Plane
 
     out = []
@@ -91,7 +92,11 @@ def _loop_pieces(loop, surface, patch, tol) -> list:
                              _knot_breaks(c, t0, t1)))
         else:
             out.append(piece.nurbs())
-    _project_onto(out, patch, tol)
+    return out
+
+
+def _loop_finish(out, surface, patch, tol) -> list:
+    """The loop's lazy intersections (in `out`, in place) as the stretches joining their neighbours."""
     for k, p in enumerate(out):
         if not isinstance(p, Piece):
             closed = len(out) == 1
@@ -121,25 +126,36 @@ def _seams(patch, tol) -> list:
     return seams
 
 
-def _project_onto(pieces, patch, tol):
-    """Replace the 3-D curves (NurbsCurve) among `pieces` by Pieces following their closest points on the
-    patch. On a seam the closest point is ambiguous (lo or hi): each piece keeps the side its own
-    off-seam samples lie on at either end, and a piece running along the seam takes the side of its
-    neighbours' ends, so the loop stays connected in (u, v)."""
+def _project_onto(loops, patches, tol):
+    """Replace the 3-D curves (NurbsCurve) among the pieces of each loop (in place) by Pieces following
+    their closest points on the loop's patch, the closest-point searches of all loops together
+    (`closest_together`). On a seam the closest point is ambiguous (lo or hi): each piece keeps the
+    side its own off-seam samples lie on at either end, and a piece running along the seam takes the side
+    of its neighbours' ends, so the loop stays connected in (u, v)."""
     from rgm.geometry import NurbsCurve
 
-    if not any(isinstance(c, NurbsCurve) for c in pieces):
-        return
-    seams = _seams(patch, tol)
     probe = np.linspace(0.0, 1.0, 33)
-    curves = [k for k, c in enumerate(pieces) if isinstance(c, NurbsCurve)]
-    x = np.concatenate([pieces[k].evaluate(pieces[k].domain[0] + probe * np.ptp(pieces[k].domain)) for k in curves])
-    # one search for all the loop's curves: they lie on the surface, so the nearest grid node's basin is
+    jobs = [(pieces, patch, [k for k, c in enumerate(pieces) if isinstance(c, NurbsCurve)])
+            for pieces, patch in zip(loops, patches)]
+    jobs = [j for j in jobs if j[2]]
+    if not jobs:
+        return
+    xs = [np.concatenate([pieces[k].evaluate(pieces[k].domain[0] + probe * np.ptp(pieces[k].domain)) for k in curves])
+          for pieces, _, curves in jobs]
+    # one search for all the loops' curves: they lie on the surface, so the nearest grid node's basin is
     # nearly always the closest point's; the points not found on the surface get all four starts
-    uv, dist = patch.closest(x, grid=32, starts=1)
-    redo = dist > 1e-9 * float(np.ptp(x, axis=0).max())
-    if redo.any():
-        uv[redo], dist[redo] = patch.closest(x[redo], grid=32)
+    found = closest_together([patch for _, patch, _ in jobs], xs, grid=32, starts=1)
+    for (pieces, patch, curves), x, (uv, dist) in zip(jobs, xs, found):
+        redo = dist > 1e-9 * float(np.ptp(x, axis=0).max())
+        if redo.any():
+            uv[redo], dist[redo] = patch.closest(x[redo], grid=32)
+        _follow(pieces, patch, curves, x, uv, dist, probe, tol)
+
+
+def _follow(pieces, patch, curves, x, uv, dist, probe, tol):
+    """The Pieces of `_project_onto` for one loop: its `curves` (indices into pieces), probed at `probe`
+    (points x, closest points uv at distances dist, curve after curve), on the seam sides chosen."""
+    seams = _seams(patch, tol)
     m = len(probe)
     tables = {k: (uv[i * m:(i + 1) * m], dist[i * m:(i + 1) * m]) for i, k in enumerate(curves)}
     extents = {k: float(np.ptp(x[i * m:(i + 1) * m], axis=0).max()) for i, k in enumerate(curves)}
@@ -155,12 +171,12 @@ def _project_onto(pieces, patch, tol):
                 near = [sides.get(((k - 1) % len(pieces), axis)), sides.get(((k + 1) % len(pieces), axis))]
                 value = near[0][1] if near[0] else near[1][0] if near[1] else lo
                 sides[k, axis] = (value, value)
-    for k, c in enumerate(pieces):
-        if isinstance(c, NurbsCurve):
-            seam_sides = [(a, lo, hi, sides[k, a]) for a, lo, hi in seams]
-            uv, dist = tables[k]
-            pieces[k] = Piece(patch, _Projected(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist,
-                                                extents[k]), _knot_breaks(c, *c.domain))
+    for k in curves:
+        c = pieces[k]
+        seam_sides = [(a, lo, hi, sides[k, a]) for a, lo, hi in seams]
+        uv, dist = tables[k]
+        pieces[k] = Piece(patch, _Projected(patch, c, seam_sides, _on_sides(uv, probe, seam_sides), dist,
+                                            extents[k]), _knot_breaks(c, *c.domain))
 
 
 def _on_sides(uv, s, seams):
@@ -232,15 +248,25 @@ def _with_breaks(piece, s):
 
 
 def collect_faces(objs, tol) -> list:
-    """Face records for model objects (surfaces, trimmed faces, shells); curves are skipped."""
+    """Face records for model objects (surfaces, trimmed faces, shells); curves are skipped. The 3-D
+    trimming curves of all faces are projected onto their surfaces together (`_project_onto`)."""
+    later = []                                   # (loop pieces, surface, patch) of curved faces
+    faces = _collect(objs, tol, later)
+    _project_onto([out for out, _, _ in later], [patch for _, _, patch in later], tol)
+    for out, surface, patch in later:
+        _loop_finish(out, surface, patch, tol)
+    return faces
+
+
+def _collect(objs, tol, later) -> list:
     from rgm.model import Curve, Plane, Shell, Surface, TrimmedFace
 
     faces = []
     for obj in objs:
         if isinstance(obj, Shell):
-            faces += collect_faces(obj.faces, tol)
+            faces += _collect(obj.faces, tol, later)
         elif isinstance(obj, TrimmedFace):
-            faces.append(_trimmed_face(obj, tol))
+            faces.append(_trimmed_face(obj, tol, later))
         elif isinstance(obj, Plane):
             raise BackendError(f"`{obj.name or 'plane'}` is an infinite plane; trim it with a loop to mesh it")
         elif isinstance(obj, Surface):
@@ -250,7 +276,9 @@ def collect_faces(objs, tol) -> list:
     return faces
 
 
-def _trimmed_face(face, tol):
+def _trimmed_face(face, tol, later):
+    """The Face of a TrimmedFace; the loops of a curved one are finished later (`collect_faces`), those
+    of a plane here (their plane coordinates set its patch box, and need no projection)."""
     from rgm.model import Plane
 
     surface = face.surface
@@ -258,12 +286,17 @@ def _trimmed_face(face, tol):
         if isinstance(surface, Plane):
             raise BackendError("an infinite plane needs an outer loop to be meshed")
         patch = surface_patch(surface, trimmed=bool(face.holes))   # holes live in rgm's (u, v)
-        return Face(patch, _rectangle(patch) + [_loop_pieces(h, surface, patch, tol) for h in face.holes], True)
+        holes = [_loop_start(h, surface, patch) for h in face.holes]
+        later += [(h, surface, patch) for h in holes]
+        return Face(patch, _rectangle(patch) + holes, True)
     if not isinstance(surface, Plane):
         patch = surface_patch(surface, trimmed=True)
-        return Face(patch, [_loop_pieces(loop, surface, patch, tol) for loop in face.loops()], True)
+        loops = [_loop_start(loop, surface, patch) for loop in face.loops()]
+        later += [(out, surface, patch) for out in loops]
+        return Face(patch, loops, True)
     # a plane's patch box: the loops' plane coordinates (which do not depend on the box)
-    loops = [_loop_pieces(loop, surface, PlanePatchBox(surface), tol) for loop in face.loops()]
+    box = PlanePatchBox(surface)
+    loops = [_loop_finish(_loop_start(loop, surface, box), surface, box, tol) for loop in face.loops()]
     uv = np.concatenate([p.uv(np.linspace(0, 1, 65)) for loop in loops for p in loop])
     lo, hi = uv.min(0), uv.max(0)
     pad = 1e-9 * float(np.max(hi - lo)) + 1e-12

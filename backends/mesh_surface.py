@@ -102,12 +102,7 @@ class Patch:
 
     def closest(self, points, grid: int = 96, starts: int = 4):
         """Global closest points: `project` from each seed (`_seeds`), keeping the nearest result."""
-        x = np.asarray(points, float)
-        seeds = self._seeds(x, grid, starts)                       # (m, k, 2)
-        k = seeds.shape[1]
-        uv, dist = self.project(np.repeat(x, k, axis=0), seeds.reshape(-1, 2), iterations=10)
-        pick = np.arange(len(x)) * k + np.argmin(dist.reshape(-1, k), axis=1)
-        return uv[pick], dist[pick]
+        return closest_together([self], [points], grid, starts)[0]
 
     def _seeds(self, x, grid, starts):
         """(m, starts, 2): the `starts` nodes of a grid x grid parameter grid nearest to each point
@@ -327,6 +322,21 @@ def project_together(patches, points, guesses, iterations: int):
         cut = np.cumsum([len(points[i]) for i in idx[:-1]])
         for i, a, b in zip(idx, np.split(uv, cut), np.split(dist, cut)):
             out[i] = (a, b)
+    return out
+
+
+def closest_together(patches, points, grid: int = 96, starts: int = 4) -> list:
+    """[(uv (k_i, 2), distances (k_i,))]: `Patch.closest` of points[i] (k_i, 3) on patches[i], the
+    Gauss-Newton runs from every seed of every patch together (`project_together`)."""
+    xs = [np.asarray(x, float) for x in points]
+    seeds = [p._seeds(x, grid, starts) for p, x in zip(patches, xs)]          # (k_i, seeds, 2)
+    found = project_together(patches, [np.repeat(x, s.shape[1], axis=0) for x, s in zip(xs, seeds)],
+                             [s.reshape(-1, 2) for s in seeds], 10)
+    out = []
+    for x, s, (uv, dist) in zip(xs, seeds, found):
+        k = s.shape[1]
+        pick = np.arange(len(x)) * k + np.argmin(dist.reshape(-1, k), axis=1)
+        out.append((uv[pick], dist[pick]))
     return out
 
 
