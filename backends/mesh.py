@@ -19,6 +19,9 @@ Pipeline:
    triangle gets a point where its measured deviation is largest (or the midpoint of its longest edge
    when only the normal fails); a failure on a boundary edge splits that edge for every face sharing it.
    A planar face is triangulated in its plane from its boundary samples alone (`rgm.backends.mesh_planar`).
+   The faces are refined in lock-step (`run_together`): each pass, the samples every face measures are
+   evaluated and projected together (`rgm.backends.mesh_surface.PatchStack`), as are the faces'
+   boundaries and trimming-curve projections, so a part's per-face costs are paid once per pass.
 4. Per-face orientation is made consistent across shared edges; closed components face outwards.
 """
 from __future__ import annotations
@@ -31,6 +34,7 @@ from rgm.errors import BackendError
 
 from .mesh_cdt import Incremental, OnSegment, constrained_delaunay, inside_loops
 from .mesh_edges import CERTIFY, Edges, segment_distance, uv_of
+from .mesh_surface import evaluate_together, project_together
 from .mesh_faces import collect_faces
 from .mesh_planar import plane_frame, simple_loops
 
@@ -109,8 +113,9 @@ def _degenerate_s(piece, grid):
 
 
 class _FaceMesher:
-    """Mesh one face given the current edge sampling. `run` refines until every triangle is certified;
-    boundary splits it needs are made on the shared edges (so neighbours may have to run again)."""
+    """Mesh one face given the current edge sampling. `passes` refines until every triangle is certified
+    (driven by `run_together` with the other faces); boundary splits it needs are made on the shared
+    edges (so neighbours may have to run again)."""
 
     def __init__(self, face, edges, piece_ids, tol, angle_tol):
         self.face, self.edges, self.piece_ids = face, edges, piece_ids
@@ -230,7 +235,10 @@ class _FaceMesher:
         self.tri_local, self.xyz, self.uv = used[tri], xyz, self.b_uv
         return True
 
-    def run(self):
+    def passes(self):
+        """The refinement as a generator: it yields each measurement it needs, (points (k, 3), parameter
+        guesses (k, 2)), and is sent the upper bounds of their distances to the surface (`deviations`),
+        so that `run_together` measures many faces in one call per pass."""
         from scipy.spatial import cKDTree
 
         if self.frame is not None:
@@ -266,7 +274,7 @@ class _FaceMesher:
             todo = ~np.isin(key, self.certified)
             fail = np.zeros(len(tri), bool)
             worst = np.zeros(len(tri), int)
-            fail[todo], worst[todo] = self._measure(tri[todo], xyz, uv)
+            fail[todo], worst[todo] = yield from self._measure(tri[todo], xyz, uv)
             self.certified = np.union1d(self.certified, key[todo & ~fail])
             if not fail.any():
                 self.tri_local, self.xyz, self.uv = tri, xyz, uv
@@ -306,20 +314,6 @@ class _FaceMesher:
         at[normal] = 0.5 * (uv[a[normal]] + uv[b[normal]])
         return at[~on_boundary]
 
-    def _deviation(self, x, guess):
-        """Upper bounds (k,) of the distance to the surface of points x (k, 3) with parameter guesses
-        guess (k, 2) (modified): the surface point at the guess, then Gauss-Newton closest points (one
-        step, then two more) where that bound exceeds the limit."""
-        patch, limit = self.face.patch, CERTIFY * self.tol
-        dist = np.linalg.norm(x - patch.evaluate(guess[:, 0], guess[:, 1]), axis=1)
-        for iterations in (1, 2):
-            rows = np.flatnonzero(dist > limit)
-            if len(rows) == 0:
-                break
-            guess[rows], d = patch.project(x[rows], guess[rows], iterations=iterations)
-            dist[rows] = np.minimum(dist[rows], d)
-        return dist
-
     def _measure(self, tri, xyz, uv):
         """(failing (t,), worst (t,)) of triangles tri (t, 3) (local ids into xyz (n, 3) and uv (n, 2)):
         worst is the lattice sample of largest deviation, or -1 - k when only the normal fails and edge k
@@ -347,19 +341,19 @@ class _FaceMesher:
             g = np.einsum("sk,tkd->tsd", samples, uv[tri[rows]]).reshape(-1, 2)
             return x, g
 
-        def deviation(*parts):   # one measurement of all the parts' points, split back
-            d = self._deviation(np.concatenate([x for x, _ in parts]), np.concatenate([g for _, g in parts]))
+        def deviation(*parts):   # one measurement of all the parts' points (with other faces'), split back
+            d = yield np.concatenate([x for x, _ in parts]), np.concatenate([g for _, g in parts])
             return np.split(d, np.cumsum([len(x) for x, _ in parts[:-1]]))
 
         on_edge = np.zeros((len(keys), 5))
         dist = np.zeros((len(tri), len(_BARY)))
-        on_edge[:, 2], dist[:, _CENTROID] = deviation(along(np.arange(len(keys)), [3]),
-                                                      inside(np.arange(len(tri)), _BARY[[_CENTROID]]))
+        on_edge[:, 2], dist[:, _CENTROID] = yield from deviation(along(np.arange(len(keys)), [3]),
+                                                                 inside(np.arange(len(tri)), _BARY[[_CENTROID]]))
         dist[:, _ON_EDGE] = on_edge.ravel()[slot]
         full = np.flatnonzero((dist <= limit).all(axis=1))             # only the coarse samples are set
         if len(full):
             edges = np.unique(eid[full])
-            rest, inner = deviation(along(edges, [1, 2, 4, 5]), inside(full, _BARY[_INNER]))
+            rest, inner = yield from deviation(along(edges, [1, 2, 4, 5]), inside(full, _BARY[_INNER]))
             on_edge[edges[:, None], [0, 1, 3, 4]] = rest.reshape(-1, 4)
             dist[full[:, None], _ON_EDGE] = on_edge.ravel()[slot[full]]
             dist[full[:, None], _INNER] = inner.reshape(len(full), -1)
@@ -396,6 +390,47 @@ def _uses_changed(mesher, edges) -> bool:
     return any(mesher.versions[g] != edges.version[g] for g in groups)
 
 
+def deviations(requests) -> list:
+    """Upper bounds [(k_i,)] of the distances of points x_i (k_i, 3) to the surfaces of their faces, for
+    requests [(mesher, x_i, guesses (k_i, 2))]: the surface point at the guess, then Gauss-Newton closest
+    points (one step, then two more) where that bound exceeds CERTIFY * the mesher's tol; every face's
+    points evaluated and projected together (`evaluate_together`, `project_together`)."""
+    patches = [m.face.patch for m, _, _ in requests]
+    xs, guesses = [x for _, x, _ in requests], [g.copy() for _, _, g in requests]
+    dist = [np.linalg.norm(x - p, axis=1) for x, p in zip(xs, evaluate_together(patches, guesses))]
+    for iterations in (1, 2):
+        rows = [np.flatnonzero(d > CERTIFY * m.tol) for d, (m, _, _) in zip(dist, requests)]
+        live = [i for i, r in enumerate(rows) if len(r)]
+        if not live:
+            break
+        found = project_together([patches[i] for i in live], [xs[i][rows[i]] for i in live],
+                                 [guesses[i][rows[i]] for i in live], iterations)
+        for i, (uv, d) in zip(live, found):
+            guesses[i][rows[i]] = uv
+            dist[i][rows[i]] = np.minimum(dist[i][rows[i]], d)
+    return dist
+
+
+def run_together(meshers):
+    """Run every mesher's refinement (`_FaceMesher.passes`) in lock-step: each round, the measurements
+    all the unfinished faces ask for are made in one `deviations` call."""
+    waiting = {}
+    for m in meshers:
+        gen = m.passes()
+        try:
+            waiting[m] = (gen, next(gen))
+        except StopIteration:
+            pass
+    while waiting:
+        asked = list(waiting.items())
+        answers = deviations([(m, x, g) for m, (_, (x, g)) in asked])
+        for (m, (gen, _)), d in zip(asked, answers):
+            try:
+                waiting[m] = (gen, gen.send(d))
+            except StopIteration:
+                del waiting[m]
+
+
 def boundaries(meshers) -> list:
     """[(samples, uv)] of every mesher's boundary on the current edge sampling (`_FaceMesher.samples`),
     their (u, v) found by one `uv_of` for all faces' pieces (projections stacked across faces)."""
@@ -422,15 +457,14 @@ def tessellate_faces(faces, tol: float, angle_tol: float | None = None, eps: flo
     meshers = [_FaceMesher(f, edges, pid, tol, angle_tol) for f, pid in zip(faces, ids)]
     for m, found in zip(meshers, boundaries(meshers)):
         m.start(found)
-    for m in meshers:
-        m.run()
+    run_together(meshers)
     for _ in range(16):   # a face that split a shared edge changed its neighbours' boundaries: redo those
         stale = [m for m in meshers if _uses_changed(m, edges)]
         if not stale:
             break
         for m, found in zip(stale, boundaries(stale)):
             m.refresh(found)
-            m.run()
+        run_together(stale)
     else:
         raise BackendError("the shared edges did not settle after 16 rounds of splitting")
     coords = edges.coords()
