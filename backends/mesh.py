@@ -80,26 +80,30 @@ class Mesh:
 
 # --- faces: grid, triangulation, measured refinement ----------------------------------------------
 
-def _grid(patch, tol):
-    """Initial grid lines (gu, gv): every knot span cut into max(1, ceil(8 sqrt(d / tol))) equal steps,
-    d the largest sagitta measured over 8 probe steps of the span along several iso-lines."""
-    (u0, u1), (v0, v1) = patch.domain
-
-    def along(breaks, lo, hi, other, first):
-        probes = np.unique(np.concatenate([np.linspace(lo, hi, 9), other, 0.5 * (other[:-1] + other[1:])]))
-        t = breaks[:-1, None] + np.diff(breaks)[:, None] * np.linspace(0, 1, 17)[None, :]   # (spans, 17)
-        tt, pp = np.meshgrid(t.ravel(), probes, indexing="ij")
-        uv = (tt, pp) if first else (pp, tt)
-        pts = patch.evaluate(uv[0].ravel(), uv[1].ravel()).reshape(len(breaks) - 1, 17, len(probes), 3)
+def _grids(patches, tol) -> list:
+    """Initial grid lines [(gu, gv)] per patch: every knot span cut into max(1, ceil(8 sqrt(d / tol)))
+    equal steps, d the largest sagitta measured over 8 probe steps of the span along several iso-lines;
+    all the patches' probes evaluated together (`evaluate_together`)."""
+    plans, uvs = [], []
+    for patch in patches:
+        (u0, u1), (v0, v1) = patch.domain
+        bu = np.unique(np.concatenate([[u0, u1], patch.breaks_u]))
+        bv = np.unique(np.concatenate([[v0, v1], patch.breaks_v]))
+        for breaks, lo, hi, other, first in ((bu, v0, v1, bv, True), (bv, u0, u1, bu, False)):
+            probes = np.unique(np.concatenate([np.linspace(lo, hi, 9), other, 0.5 * (other[:-1] + other[1:])]))
+            t = breaks[:-1, None] + np.diff(breaks)[:, None] * np.linspace(0, 1, 17)[None, :]   # (spans, 17)
+            tt, pp = np.meshgrid(t.ravel(), probes, indexing="ij")
+            uvs.append(np.column_stack([tt.ravel(), pp.ravel()] if first else [pp.ravel(), tt.ravel()]))
+            plans.append((breaks, len(probes)))
+    lines = []
+    for (breaks, m), pts in zip(plans, evaluate_together([p for p in patches for _ in (0, 1)], uvs)):
+        pts = pts.reshape(len(breaks) - 1, 17, m, 3)
         ends, mids = pts[:, 0::2], pts[:, 1::2]
         d = segment_distance(mids, ends[:, :-1], ends[:, 1:]).max(axis=(1, 2))
         n = np.maximum(1, np.ceil(8 * np.sqrt(d / (CERTIFY * tol)))).astype(int)
-        return np.unique(np.concatenate([[breaks[0]]] + [np.linspace(a, b, k + 1)[1:]
-                                                         for a, b, k in zip(breaks[:-1], breaks[1:], n)]))
-
-    bu = np.unique(np.concatenate([[u0, u1], patch.breaks_u]))
-    bv = np.unique(np.concatenate([[v0, v1], patch.breaks_v]))
-    return along(bu, v0, v1, bv, True), along(bv, u0, u1, bu, False)
+        lines.append(np.unique(np.concatenate([[breaks[0]]] + [np.linspace(a, b, k + 1)[1:]
+                                                               for a, b, k in zip(breaks[:-1], breaks[1:], n)])))
+    return list(zip(lines[0::2], lines[1::2]))
 
 
 def _degenerate_s(piece, grid):
@@ -124,9 +128,9 @@ class _FaceMesher:
         self.qhull = Incremental()
         self.frame = plane_frame(face.patch, tol)
         self.interior = np.zeros((0, 2))
-        if self.frame is None:
-            face.grid = _grid(face.patch, tol)
-        else:   # the grid only sets where the poles' samples fall
+        # a curved face's grid is set by `tessellate_faces` (`_grids`, for all faces at once); on a planar
+        # one the grid only sets where the poles' samples fall
+        if self.frame is not None:
             face.grid = (np.unique(np.concatenate([face.patch.domain[0], face.patch.breaks_u])),
                          np.unique(np.concatenate([face.patch.domain[1], face.patch.breaks_v])))
 
@@ -245,7 +249,7 @@ class _FaceMesher:
             if self._flat():
                 return
             self.frame = None
-            self.face.grid = _grid(self.face.patch, self.tol)
+            self.face.grid = _grids([self.face.patch], self.tol)[0]
             self.start()
         patch, nb = self.face.patch, None
         for _ in range(MAX_PASSES):
@@ -455,6 +459,9 @@ def tessellate_faces(faces, tol: float, angle_tol: float | None = None, eps: flo
                     for i in range(len(f.loops))])
         k += sum(len(l) for l in f.loops)
     meshers = [_FaceMesher(f, edges, pid, tol, angle_tol) for f, pid in zip(faces, ids)]
+    curved = [m for m in meshers if m.frame is None]
+    for m, grid in zip(curved, _grids([m.face.patch for m in curved], tol)):
+        m.face.grid = grid
     for m, found in zip(meshers, boundaries(meshers)):
         m.start(found)
     run_together(meshers)
