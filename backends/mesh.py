@@ -170,10 +170,7 @@ class _FaceMesher:
     def _boundary(self, found=None):
         """Boundary samples (uv, vertex ids), loops and segments from the current edge sampling; `found`:
         (`samples`, their uv), as `boundaries` finds them for many faces at once."""
-        if found is None:
-            sampled = self.samples()
-            found = sampled, uv_of(*sampled[:2])    # one projection for all pieces
-        (_, _, ids, groups, reps, loops), uvs = found
+        (_, _, ids, groups, reps, loops), uvs = found or boundaries([self])[0]
         self.loops = loops
         self.segments = np.concatenate([np.column_stack([lp, np.roll(lp, -1)]) for lp in loops]).astype(np.int64)
         self.b_uv = np.concatenate(uvs)

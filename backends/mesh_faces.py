@@ -195,7 +195,7 @@ class _Projected:
     guesses, so the many small calls of edge sampling are local refinements; a point that ends farther
     from the surface than twice the table's worst (plus 1e-9 of the curve's `extent`) is searched
     globally. Called as a function; `rgm.backends.mesh_edges.uv_of` runs the Gauss-Newton steps of all
-    the pieces on one patch together (`start`, one `Patch.project`, `finish`)."""
+    the pieces together (`start`, one `rgm.backends.mesh_surface.project_together`, `finish`)."""
 
     def __init__(self, patch, curve, seams, table_uv, table_dist, extent: float):
         self.patch, self.seams = patch, seams
