@@ -363,13 +363,30 @@ def _penalty(smoothing: float, n_ctrl: int, n_data: int) -> float:
     return smoothing * min(1.0, DATA_PER_CTRL * n_ctrl / max(n_data, 1)) ** 2
 
 
-def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING, anchors=None):
+def closure_u(ku, p: int, nu: int, nv: int) -> sp.csr_matrix:
+    """(nu nv, (nu - 2) nv) map from free control points to a net closed C1 across u = 0 / u = 1 (a
+    surface that wraps round, its cut at the domain's ends): P_{n-1} = P_0, and P_1 - P_0 = r (P_{n-1} -
+    P_{n-2}) with r = h_0 / h_last, the first and last knot spans (clamped ends: S_u(0) = p/h_0 (P_1 - P_0),
+    S_u(1) = p/h_last (P_{n-1} - P_{n-2})). Free columns: 0, 2, 3, ..., n-2 of the net."""
+    if nu < 4:
+        raise GeometryError(f"a net closed in u needs at least 4 control points along u, got {nu}")
+    r = (ku[p + 1] - ku[p]) / (ku[nu] - ku[nu - 1])
+    free = np.r_[0, np.arange(2, nu - 1)]                      # net column of each free column
+    rows = [free, [nu - 1], [1, 1]]
+    cols = [np.arange(len(free)), [0], [0, len(free) - 1]]      # P_1 = (1 + r) P_0 - r P_{n-2}
+    vals = [np.ones(len(free)), [1.0], [1.0 + r, -r]]
+    tu = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(nu, nu - 2))
+    return sp.kron(tu, sp.identity(nv), format="csr")
+
+
+def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING, anchors=None, closed_u: bool = False):
     """Least-squares control net (nu, nv, 3) for scattered points (n, 3) at parameters (u, v), minimising
     sum |S(u_i, v_i) - P_i|^2 + n * w * (bending energy along u + along v) (see `_bending`), w the
     `_penalty` of `smoothing`: a penalty on the surface, not on its net. `anchors` (`Anchors`) add
     sum weight |S(uv_a) - xyz_a|^2: points the surface is to pass through at fixed parameters (a penalty
     constraint, such as a boundary curve shared with a neighbour, `rgm.fitters.patches`), not data.
-    Returns (ctrl, basis)."""
+    `closed_u`: the net is closed C1 across u = 0 / u = 1 (`closure_u`), exactly, for a surface that
+    wraps round. Returns (ctrl, basis)."""
     basis = ScatteredBasis.build(np.asarray(u, float), np.asarray(v, float), ku, kv, p, q)
     nu, nv = basis.shape
     M, rhs = basis.normal_equations(points)
@@ -380,8 +397,14 @@ def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING, anchors=Non
     (iu, Ru), (iv, Rv) = _bending(ku, p, nu), _bending(kv, q, nv)
     w = len(points) * _penalty(smoothing, nu * nv, len(points))
     R = w * iu**3 / iv * sp.kron(Ru, sp.identity(nv)) + w * iv**3 / iu * sp.kron(sp.identity(nu), Rv)
-    M = (M + R + 1e-14 * M.diagonal().max() * sp.identity(nu * nv)).tocsc()
+    M = M + R
+    if closed_u:
+        T = closure_u(ku, p, nu, nv)
+        M, rhs = T.T @ M @ T, T.T @ rhs
+    M = (M + 1e-14 * M.diagonal().max() * sp.identity(M.shape[0])).tocsc()
     ctrl = scipy.sparse.linalg.splu(M).solve(rhs)   # sparse LU of the banded normal matrix: no dense BLAS
+    if closed_u:
+        ctrl = T @ ctrl
     return ctrl.reshape(nu, nv, 3), basis
 
 

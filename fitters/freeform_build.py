@@ -99,7 +99,9 @@ def patch_part(result) -> FreeformPart:
     out = FreeformPart(notes=list(result.skipped))
     for p in result.patches:
         out.shapes.append(p.shape)
-        out.info.append(_describe(p.shape, f"projection onto a {p.base.kind}", len(p.indices), p.seconds))
+        how = f"projection onto a {p.base.kind}" + (", one of two faces of a surface closed round its axis"
+                                                    if p.base.wrap is not None else "")
+        out.info.append(_describe(p.shape, how, len(p.indices), p.seconds))
     for g in result.gaps:
         if g.shared and g.curve:
             out.notes.append(f"patches {g.i + 1} | {g.j + 1}: one shared edge, a curve midway between their surfaces "

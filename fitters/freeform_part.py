@@ -159,7 +159,8 @@ def _inset(t: np.ndarray, margin: float) -> np.ndarray:
 
 
 def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statistic: str = "p95",
-                 max_ctrl: int = 40000, cuts: bool = True, params=None, anchors=None) -> FreeformShape:
+                 max_ctrl: int = 40000, cuts: bool = True, params=None, anchors=None, surface=None,
+                 band=None, cover=None) -> FreeformShape:
     """Fit a trimmed NURBS surface to a part's points (n, 3), or to a range grid (rows, cols, 3) with
     its valid mask. `tol` (model units) bounds `statistic` of the residuals. With `cuts`, planar boundary
     pieces become described plane intersections, when the intersection follows the data's edge and the
@@ -168,7 +169,11 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
     without them the points are projected onto their best-fit plane. `anchors`
     (`rgm.fitters.freeform.Anchors`, in the surface's parameters), scattered data only: points the
     surface is pulled through by a weighted penalty (`rgm.fitters.freeform_surface.fit_surface`), such
-    as a boundary curve shared with a neighbouring patch."""
+    as a boundary curve shared with a neighbouring patch. `surface` (a SurfaceFit over `params`, scattered
+    data): the surface is already fitted, only trimmed here (a face cut from a closed wrap,
+    `rgm.fitters.wrap`), with its loops held within `band` (u0, u1) and along its ends
+    (`rgm.fitters.trimloops.fit_trim_loops`); `cover` (k, 2): parameters of the neighbour's data past the
+    band's ends, whose cells count as occupied, so that the loops run along the ends without a notch."""
     if grid is not None:
         mask = np.isfinite(grid).all(axis=2) if mask is None else mask
         ug, vg = (_inset(t, 0.5 / (len(t) - 1)) for t in grid_parameters(np.where(mask[..., None], grid, 0.0), mask))
@@ -178,10 +183,13 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
         spacing = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=2)[mask[:, 1:] & mask[:, :-1]]))
     else:
         bins = int(np.clip(np.sqrt(len(points)) / 2, 24, 256))
-        u, v = (_inset(np.asarray(t, float), 0.5 / bins)
-                for t in (plane_parameters(points)[:2] if params is None else params))
-        fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl, anchors=anchors)
-        region = _occupancy(u, v, bins)
+        if surface is None:
+            u, v = (_inset(np.asarray(t, float), 0.5 / bins)
+                    for t in (plane_parameters(points)[:2] if params is None else params))
+            fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl, anchors=anchors)
+        else:
+            (u, v), fit = map(np.asarray, params), surface
+        region = _occupancy(u, v, bins) if cover is None else _occupancy(*np.r_[np.c_[u, v], cover].T, bins)
         rows = cols = (np.arange(bins) + 0.5) / bins
         snap = np.c_[u, v]
         from scipy.spatial import cKDTree
@@ -189,7 +197,7 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
         spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
         spacing = max(spacing, float(np.ptp(points, axis=0).max()) / bins)   # the edge is known to a raster cell
     loops = fit_trim_loops(region, rows, cols, tol_uv=tol / _surface_speed(fit), snap_to=snap,
-                           domain=fit.nurbs().domain)
+                           domain=fit.nurbs().domain, band=band)
     outer = list(loops.outer)
     data = grid[mask] if grid is not None else points
     size = float(np.ptp(data, axis=0).max())

@@ -74,12 +74,12 @@ class _SurfaceProblem:
     """The data of a surface fit and how to solve and measure it on given knot vectors: the separable
     solve for a full grid, the sparse normal equations otherwise. Residuals are per data point."""
 
-    def __init__(self, points, mask, params, degree, smoothing, statistic, anchors=None):
+    def __init__(self, points, mask, params, degree, smoothing, statistic, anchors=None, closed_u=False):
         pts = np.asarray(points, float)
         self.degree, self.smoothing, self.statistic, self.grid = degree, smoothing, statistic, None
-        self.anchors = anchors
-        if anchors is not None and pts.ndim == 3:
-            raise GeometryError("anchor points need scattered data (a grid is solved separably)")
+        self.anchors, self.closed_u = anchors, closed_u
+        if (anchors is not None or closed_u) and pts.ndim == 3:
+            raise GeometryError("anchor points and closed nets need scattered data (a grid is solved separably)")
         if pts.ndim == 3:
             valid = np.isfinite(pts).all(axis=2)
             mask = valid if mask is None else (np.asarray(mask, bool) & valid)
@@ -117,7 +117,8 @@ class _SurfaceProblem:
         if self.grid is not None:
             ctrl = solve_grid(self.ug, self.vg, self.grid, ku, kv, p, p, self.smoothing)[0]
         else:
-            ctrl = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing, self.anchors)[0]
+            ctrl = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing, self.anchors,
+                                   self.closed_u)[0]
         return ctrl, self.residuals(ku, kv, ctrl, tol)
 
     def residuals(self, ku, kv, ctrl, tol):
@@ -196,7 +197,7 @@ class _SurfaceProblem:
 def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
                 n_initial: int | None = None, max_ctrl: int = 40000, statistic: str = "max",
                 smoothing: float = SMOOTHING, prune: int = 8, min_lines: float = 1.0,
-                data_per_ctrl: float = DATA_PER_CTRL, anchors=None) -> SurfaceFit:
+                data_per_ctrl: float = DATA_PER_CTRL, anchors=None, closed_u: bool = False) -> SurfaceFit:
     """Least-squares bicubic (by default) B-spline surface of `points` refined by knot insertion.
 
     points: (n, 3) scattered points, or a grid (rows, cols, 3) with optional `mask` (rows, cols) of valid
@@ -211,6 +212,8 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
         not data, and the residuals and the certificate are the data's alone. With `Anchors.tol`, the
         spans whose anchors are missed by more are refined too (within the same limits), and the
         refinement goes on until both hold; the bisection and the pruning keep both.
+    closed_u: scattered data only: u is an angle round a closed wrap, u = 0 and u = 1 the same points; every
+        net is closed C1 across them (`rgm.fitters.freeform.closure_u`), knot insertion keeping it so.
     Refinement stops when the statistic is met; when every span that exceeds the tolerance holds fewer
     than 2 `min_lines` data lines, or the net would exceed one control point per `data_per_ctrl` data
     points (see the module docstring); or when the net would exceed `max_ctrl` (the last step then
@@ -220,7 +223,7 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
     knots whose neighbourhood is far inside the tolerance are removed in one batch, and up to `prune`
     single knots, quietest first, each only when the fit still holds without it.
     """
-    prob = _SurfaceProblem(points, mask, params, degree, smoothing, statistic, anchors)
+    prob = _SurfaceProblem(points, mask, params, degree, smoothing, statistic, anchors, closed_u)
     limit = max((degree + 1) ** 2, int(len(prob.data) / data_per_ctrl))
     ku = kv = uniform_knots(degree, n_initial or initial_net_size(*prob.char, degree, len(prob.data)))
     prev, history, stopped, step, final = None, [], "", None, ""

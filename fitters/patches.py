@@ -16,10 +16,12 @@ merged views of a closed or wrapped part:
    cylinder whose axis is the direction most nearly perpendicular to all normals (the smallest
    eigenvector of sum n n^T) through the least-squares meeting point of the normal lines; u is the angle
    about the axis cut at the largest angular gap, v the height. A patch that wraps fully round (no gap)
-   is split into two halves; a patch that fits neither base (a crease too soft to be found, such as a
-   rounded bottom edge) is split into its mantle and its ends (normals across or along the cylinder
-   axis), or failing that across its longest extent. Both parameters are scaled to [0, 1]², then into
-   [m, 1 - m] (`reach_past`) so that the surface reaches 5 point spacings past its data on every side.
+   is one surface closed round the axis, cut into two faces along two of its iso-lines, so their seams
+   are the same curve on both (`rgm.fitters.wrap`; refitted together, `_refit_wrap`); a patch that fits
+   neither base (a crease too soft to be found, such as a rounded bottom edge) is split into its mantle
+   and its ends (normals across or along the cylinder axis), or failing that across its longest extent.
+   Both parameters are scaled to [0, 1]², then into [m, 1 - m] (`reach_past`) so that the surface
+   reaches 5 point spacings past its data on every side.
 3. Each patch is fitted by `fit_freeform` with those parameters (least squares, knot insertion to the
    tolerance, trimming loops from the occupied cells of (u, v)). A piece whose fit stops at a limit
    (approximation or control net) with the tolerance unmet (its projection folds, or it spans faces a
@@ -34,8 +36,8 @@ merged views of a closed or wrapped part:
    reach past their data (2.), so near a crease they usually cross. G0 then holds by construction to
    the intersection's approximation; it is measured, not assumed: along the shared edge as the back ends
    take it (each face's stretch of the branch approximated at the model tolerance, on its own surface,
-   against the other face's). Where nothing is shared (surfaces meeting nearly tangentially, such as the
-   two halves of a wrap; surfaces that do not reach past the crease; seams of a few samples; a rebuilt
+   against the other face's). Where nothing is shared (surfaces meeting nearly tangentially; surfaces
+   that do not reach past the crease; seams of a few samples; a rebuilt
    loop that would not be valid) the faces keep their own trims and the gap is measured as before:
    points sampled along one patch's trimming loop near the other patch projected onto the other patch's
    surface (closest points), of the order of the trim's distance from the data edge (a few point
@@ -64,14 +66,15 @@ merged views of a closed or wrapped part:
    Last, the seams still over the tolerance whose surfaces do not cross along them (meeting tangentially,
    stopping short, crossing elsewhere) are shared as one curve midway between the two surfaces where one
    lies within the tolerance of both (`rgm.fitters.seam_curves`: `seam_i_j := bspline(...)` in both
-   loops), the shared intersections kept as they were; the set is kept if it scores better. YCB mustard
-   bottle at 1 mm: all 21 seams within, worst 0.95 mm, 3 shared (20 within, worst 1.23 mm at the wrap
-   halves, 4 shared, with such patches refitted without anchors; 16 within, worst 1.48 mm, with a plain
-   refit at half the tolerance); potted meat can: 33 of 42 within, 5 intersections shared, worst
-   2.66 mm (29 of 42, worst 3.17 mm, after one refit round; 28 with each linked group's refit kept or
-   dropped as a whole; 25 of 41 with the refit unheld). The figures move with the views: with the views'
-   noise drawn from seeds 2, 3, 4 instead of 1, the mustard bottle has 12 of 12, 12 of 15 (worst 3.28 mm)
-   and 18 of 18 seams within, the meat can 29 of 53, 33 of 40 and 29 of 49 (worst 2.7-3.5 mm).
+   loops), the shared intersections kept as they were; the set is kept if it scores better. A closed
+   wrap's two faces are refitted together, as one surface; when a round brings nothing, it is tried
+   again with the wraps held as fixed neighbours. YCB mustard bottle at 1 mm: all 21 seams within,
+   worst 0.91 mm, 4 shared; potted meat can: 37 of 42 within, worst 1.77 mm. The figures move with the
+   views: with the views' noise drawn from seeds 2, 3, 4 instead of 1, the mustard bottle has 10 of 12
+   (worst 1.64 mm), 14 of 14 and 17 of 17 seams within, the meat can 31 of 52, 30 of 40 and 34 of 50
+   (worst 2.7-3.5 mm). Before the wraps were closed (two halves apart, parameterised each over its own
+   angle): mustard 21 of 21, 12 of 12, 12 of 15 (the wrap's seam 2.82 mm), 18 of 18; meat can 33 of 42,
+   29 of 53, 33 of 40, 29 of 49.
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
@@ -90,12 +93,14 @@ from rgm.fitters.freeform import Anchors, design_matrix
 from rgm.fitters.freeform_part import FreeformShape, fit_freeform
 from rgm.fitters.normals import pca_normals
 
-__all__ = ["crease_mask", "split_scattered", "base_parameters", "reach_past", "Base", "PatchFit", "Gap",
-           "PatchSet", "fit_patches", "seam_anchors", "boundary_samples", "g0_gaps"]
+__all__ = ["crease_mask", "split_scattered", "base_parameters", "reach_past", "reach_margins", "Base", "PatchFit",
+           "Gap", "PatchSet", "fit_patches", "seam_anchors", "boundary_samples", "g0_gaps"]
 
 _ANCHOR_WEIGHT = 10.0   # weight of a seam anchor relative to a data point's (`seam_anchors`)
 _GROWTH = 4             # a refitted net has at most this many times the control points (`fit_patches`)
 _FIRST = 0.5            # the first refit is at this share of the tolerance (`fit_patches`)
+_CLOSED = ("the two faces of one surface closed round its axis: their seams are iso-parameter lines of both "
+           "(`rgm.fitters.wrap`), G0 by construction")
 _WITHIN = ("refitted through a common boundary curve with its neighbour: the separate trims are measured (surfaces "
            "pulled together along a band are not intersected)")
 _ANCHOR_TOL = 0.25      # anchors are met within this share of the seam tolerance (`seam_anchors`)
@@ -204,6 +209,28 @@ class Base:
 
     kind: str
     agreement: float
+    closed: bool = False   # a cylinder's full wrap, u its angle over 2 pi (`rgm.fitters.wrap`)
+    wrap: object = field(default=None, compare=False, repr=False)   # a closed wrap's faces: their `Wrap`
+
+
+@dataclass(frozen=True)
+class Wrap:
+    """The closed wrap two faces were cut from (`rgm.fitters.wrap`): its points' indices in the input, their
+    parameters (u its angle over 2 pi, v its height, both in [0, 1]), and the faces' margin past each
+    seam (a share of the turn), which maps a face's u to the wrap's."""
+
+    indices: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    delta: float
+
+    def closed_u(self, s: np.ndarray, start: float) -> np.ndarray:
+        """The wrap's u of parameters s (k,) of its face from u = `start` (0 or 1/2)."""
+        return np.mod(np.asarray(s, float) * (0.5 + 2 * self.delta) - self.delta + start, 1.0)
+
+    def start(self, indices: np.ndarray) -> float:
+        """Where the face holding points `indices` (of the input) starts: 0 or 1/2."""
+        return 0.0 if self.u[np.flatnonzero(self.indices == indices[0])[0]] < 0.5 else 0.5
 
 
 def _unit_rows(a):
@@ -259,7 +286,9 @@ def base_parameters(points, normals, *, max_angle: float = 75.0, spacing: float 
         t = np.mod(theta - start, 2 * np.pi)
         if gaps[g] > wrap_limit or depth == 0:
             return [(idx, *_unit_box(np.c_[t, points @ axis]), Base("cylinder", agree_cyl))]
-        pieces = [idx[t < np.pi], idx[t >= np.pi]]   # a full wrap: two halves along the axis
+        # a full wrap: one surface closed round the axis (`rgm.fitters.wrap`), u its angle
+        height = _unit_box(np.c_[t, points @ axis])[1]
+        return [(idx, t / (2 * np.pi), height, Base("cylinder", agree_cyl, closed=True))]
     else:
         ends = np.abs(normals @ axis) > np.cos(np.pi / 4)
         if min(ends.sum(), (~ends).sum()) >= 0.05 * len(points):
@@ -278,11 +307,18 @@ def base_parameters(points, normals, *, max_angle: float = 75.0, spacing: float 
 
 
 def reach_past(points, u, v, reach: float, most: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
-    """Parameters u, v (n,) in [0, 1] moved into [m, 1 - m] (m per direction) so that the surface fitted
-    over [0, 1]² reaches about `reach` (model units) past its data on every side: two neighbours then
-    extend across their crease and cross there, with no domain edge clamping their intersection. m is
-    `reach` over the surface's speed in that direction (model units per parameter unit, the median of
-    least-squares Jacobians over each point's 8 nearest neighbours), at most `most`."""
+    """Parameters u, v (n,) in [0, 1] moved into [m, 1 - m] (m per direction, `reach_margins`) so that the
+    surface fitted over [0, 1]² reaches about `reach` (model units) past its data on every side: two
+    neighbours then extend across their crease and cross there, with no domain edge clamping their
+    intersection."""
+    m = reach_margins(points, u, v, reach, most)
+    return m[0] + (1 - 2 * m[0]) * np.asarray(u, float), m[1] + (1 - 2 * m[1]) * np.asarray(v, float)
+
+
+def reach_margins(points, u, v, reach: float, most: float = 0.2) -> np.ndarray:
+    """(2,) the parameter margins along u and v that `reach` (model units) takes: `reach` over the
+    surface's speed in that direction (model units per parameter unit, the median of least-squares
+    Jacobians over each point's 8 nearest neighbours), at most `most`."""
     points = np.asarray(points, float)
     uv = np.c_[u, v]
     k = min(9, len(points))
@@ -292,8 +328,7 @@ def reach_past(points, u, v, reach: float, most: float = 0.2) -> tuple[np.ndarra
     ok = np.linalg.det(gram) > 1e-12 * np.einsum("nii->n", gram) ** 2
     jac = np.linalg.solve(gram[ok], np.einsum("nki,nkd->nid", duv[ok], dx[ok]))  # (m, 2, 3): dS/du, dS/dv
     speed = np.median(np.linalg.norm(jac, axis=2), axis=0) if ok.any() else np.ones(2)
-    m = np.minimum(reach / np.maximum(speed, 1e-300), most)
-    return m[0] + (1 - 2 * m[0]) * uv[:, 0], m[1] + (1 - 2 * m[1]) * uv[:, 1]
+    return np.minimum(reach / np.maximum(speed, 1e-300), most)
 
 
 def _unit_box(uv):
@@ -399,6 +434,8 @@ def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, 
     every one of them holds. Pieces under 16 points are left out, fits that fail said in `skipped`."""
     if len(indices) < 16:
         return []
+    if base.closed:
+        return _fit_wrap(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, skipped, depth)
     params = reach_past(points[indices], *uv, 5 * spacing)
     try:
         fit = _fit_patch(points, indices, base, params, tol, statistic, max_ctrl)
@@ -419,6 +456,56 @@ def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, 
                             f"parameterisation met the tolerance ({fit.shape.fit.stopped})"]
         return halves
     return [fit]
+
+
+def _fit_wrap(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, skipped, depth,
+              anchors=None) -> list:
+    """The two faces of a full wrap (`rgm.fitters.wrap.fit_wrap`: one closed surface, two faces sharing
+    its seams exactly), their Base naming their `Wrap`; where a face misses `tol`, the two halves apart,
+    each parameterised over its own angle (`_fit_piece`), as said in `skipped`. `anchors` (in the wrap's
+    parameters): points the closed surface is pulled through (`_refit_round`); then no fallback ([])."""
+    from rgm.fitters.wrap import fit_wrap, seam_margin
+
+    reach = 5 * spacing
+    try:
+        faces = fit_wrap(points[indices], *uv, tol, statistic=statistic, max_ctrl=max_ctrl, reach=reach,
+                         anchors=anchors)
+    except GeometryError as exc:
+        if anchors is not None:
+            return []
+        skipped.append(f"a full wrap of {len(indices)} points fitted as two halves apart: {exc}")
+    else:
+        base = replace(base, wrap=Wrap(indices, *uv, seam_margin(points[indices], *uv, reach)))
+        return [PatchFit(indices[own], base, shape, seconds, params) for own, shape, seconds, params in faces]
+    out, normals = [], pca_normals(points[indices], k)[0]
+    for half in (uv[0] < 0.5, uv[0] >= 0.5):
+        for sub, u, v, b in base_parameters(points[indices[half]], normals[half], spacing=spacing, depth=2):
+            out += _fit_piece(points, indices[half][sub], b, (u, v), tol, statistic, max_ctrl, k, spacing,
+                              skipped, depth)
+    return out
+
+
+def _refit_wrap(points, plain, r, anchors, tol, statistic, max_ctrl, sizes, spacing) -> list:
+    """The two faces of patch r's closed wrap fitted again through both faces' `anchors` ({patch: Anchors}
+    in its parameters, moved to the wrap's), at tol / 2 where both faces hold, else at `tol`, the closed
+    net to at most _GROWTH times the faces' first `sizes`: [(patch, PatchFit)], or [] when neither holds."""
+    wrap = plain[r].base.wrap
+    pair = [t for t, q in enumerate(plain) if q.base.wrap is wrap]
+    own = [anchors[t] for t in pair if t in anchors]
+    if not own:
+        return []
+    cap = min(max_ctrl, max(_GROWTH * sum(sizes[t] for t in pair), 100))
+    uv = np.vstack([np.c_[wrap.closed_u(a.uv[:, 0], wrap.start(plain[t].indices)), a.uv[:, 1]]
+                    for t, a in zip(pair, own)])
+    joint = Anchors(uv, np.vstack([a.xyz for a in own]), own[0].weight, own[0].tol)
+    for at in (_FIRST * tol, tol):
+        faces = _fit_wrap(points, wrap.indices, plain[r].base, (wrap.u, wrap.v), at, statistic, cap, 0, spacing,
+                          [], 0, joint)
+        if faces and all(f.shape.fit.stats.holds for f in faces):
+            # the new faces in the old order: the face from u = 0 first in both
+            old = sorted(pair, key=lambda t: wrap.start(plain[t].indices))
+            return list(zip(old, faces))
+    return []
 
 
 def _fit_patch(points, indices, base, params, tol, statistic, max_ctrl, anchors=None) -> PatchFit:
@@ -460,7 +547,7 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
         measured = g0_gaps(points, fits, near)
         tried = [g for g in measured if g.max > tol or (g.i, g.j) in was]
         done = {(g.i, g.j): g for g in share_boundaries(points, copy, tried, tol, near, spacing, cache)}
-        return [done.get((g.i, g.j)) or replace(g, why=_WITHIN) for g in measured], copy
+        return [done.get((g.i, g.j)) or replace(g, why=g.why or _WITHIN) for g in measured], copy
 
     def with_curves(fits, result, gaps):
         # the seams still over the tolerance whose intersection cannot be shared: one curve midway between
@@ -479,26 +566,38 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
                         and not done[(g.i, g.j)].shared else g for g in gaps]
 
     plain = [PatchFit(q.indices, q.base, q.shape, q.seconds, q.params) for q in patches]
-    old_gaps = share_boundaries(points, patches, gaps, tol, near, spacing, cache)   # shares into `patches`
+    # the faces of a closed wrap meet along iso-lines of one surface: nothing to intersect there
+    closed = [g for g in gaps if _twins(patches, g.i, g.j)]
+    old_gaps = share_boundaries(points, patches, [g for g in gaps if g not in closed], tol, near, spacing, cache)
+    old_gaps = sorted(old_gaps + closed, key=lambda g: (g.i, g.j))   # shared into `patches`
     sizes = [q.shape.fit.n_ctrl for q in plain]
     fits, result, gaps = plain, patches, old_gaps
     for _ in range(_ROUNDS):
         if not any(g.max > tol for g in gaps):
             return result, gaps
         better = _refit_round(points, fits, gaps, share, cache, sizes, tol, statistic, max_ctrl, near, spacing)
+        if better is None and _wrap_pairs(fits):   # again with the closed wraps as fixed neighbours
+            better = _refit_round(points, fits, gaps, share, cache, sizes, tol, statistic, max_ctrl, near, spacing,
+                                  hold_wraps=True)
         if better is None:
             break
         fits, result, gaps = better
     return with_curves(fits, result, gaps)
 
 
-def _refit_round(points, plain, old_gaps, share, cache, sizes, tol, statistic, max_ctrl, near, spacing):
+def _refit_round(points, plain, old_gaps, share, cache, sizes, tol, statistic, max_ctrl, near, spacing,
+                 hold_wraps: bool = False):
     """One anchored refit of the patches of the seams over `tol` (`_share_and_refit`): `plain` the fits
     (their own data loops), `old_gaps` their shared gaps, `share(fits, before)` shares and measures a set;
-    nets grow to at most _GROWTH times `sizes` (the first fits'). Returns (fits, shared patches, gaps)
-    when the refit scores better, else None."""
+    nets grow to at most _GROWTH times `sizes` (the first fits'). The two faces of a closed wrap are
+    refitted together (`_refit_wrap`), or with `hold_wraps` kept as fixed neighbours. Returns (fits,
+    shared patches, gaps) when the refit scores better, else None."""
     over = [(g.i, g.j) for g in old_gaps if g.max > tol]
-    loose = sorted({r for pair in over for r in pair})
+    loose = {r for pair in over for r in pair}
+    if hold_wraps:   # the closed wraps' faces stay as they are, fixed neighbours of the rest
+        loose = sorted(r for r in loose if plain[r].base.wrap is None)
+    else:
+        loose = sorted(_with_twins(plain, loose))
     # a shared edge is kept where it is: the refitted surface is held to it too (unheld, pulled along a band
     # at its other seams, its re-intersected edge came out where OpenCASCADE's exact intersection would not
     # close its face)
@@ -506,9 +605,15 @@ def _refit_round(points, plain, old_gaps, share, cache, sizes, tol, statistic, m
              for g in old_gaps if g.shared}
     anchors = seam_anchors(points, plain, old_gaps, loose, near, spacing, _ANCHOR_TOL * tol,
                            edges={pair: e for pair, e in edges.items() if e is not None})
-    again = list(plain)
+    again, wraps = list(plain), set()
     for r in loose:
         q = plain[r]
+        if q.base.wrap is not None:   # both faces at once, on the first one's turn
+            if id(q.base.wrap) not in wraps:
+                wraps.add(id(q.base.wrap))
+                for t, fit in _refit_wrap(points, plain, r, anchors, tol, statistic, max_ctrl, sizes, spacing):
+                    again[t] = fit
+            continue
         # the net may grow to meet the anchors, to _GROWTH times its first size (no net as dense as the
         # data, wiggling between anchors it cannot all meet)
         cap = min(max_ctrl, max(_GROWTH * sizes[r], 100))
@@ -534,14 +639,21 @@ def _refit_round(points, plain, old_gaps, share, cache, sizes, tol, statistic, m
         if _score(_touching(new_gaps, mine), tol) <= _score(_touching(old_gaps, mine), tol):
             for r in mine:
                 keep[r] = plain[r]
+    # a wrap's two faces are one surface: both keep their refit or neither, as the seams of both their
+    # groups say
+    for a, b in _wrap_pairs(plain):
+        if (keep[a] is plain[a]) != (keep[b] is plain[b]):
+            mine = set(np.nonzero((group == group[a]) | (group == group[b]))[0])
+            ok = _score(_touching(new_gaps, mine), tol) > _score(_touching(old_gaps, mine), tol)
+            keep[a], keep[b] = (again[a], again[b]) if ok else (plain[a], plain[b])
     if any(a is not b for a, b in zip(keep, again)):
         if all(a is b for a, b in zip(keep, plain)):
             return None
         new_gaps, shared = share(keep, old_gaps)
     # within the set, a refitted patch whose own seams do worse than before goes back to its plain fit (a
     # group spans most patches of a part: its verdict is coarse)
-    worse = [r for r in loose if keep[r] is not plain[r] and _score(_touching(new_gaps, {r}), tol)
-             < _score(_touching(old_gaps, {r}), tol)]
+    worse = _with_twins(plain, {r for r in loose if keep[r] is not plain[r]
+                                and _score(_touching(new_gaps, {r}), tol) < _score(_touching(old_gaps, {r}), tol)})
     if worse and len(worse) < sum(a is not b for a, b in zip(keep, plain)):
         finer = [plain[r] if r in worse else q for r, q in enumerate(keep)]
         finer_gaps, finer_shared = share(finer, old_gaps)
@@ -655,4 +767,21 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int = 150) -
             dist = patches[o].shape.distance(seam)
             seams.setdefault((min(i, o), max(i, o)), []).append(dist)
     return [Gap(int(i), int(j), float(np.max(np.concatenate(d))), float(np.percentile(np.concatenate(d), 95)),
-                sum(map(len, d))) for (i, j), d in sorted(seams.items())]
+                sum(map(len, d)), why=_CLOSED if _twins(patches, i, j) else "")
+            for (i, j), d in sorted(seams.items())]
+
+
+def _wrap_pairs(patches: list[PatchFit]) -> list[tuple[int, int]]:
+    """The two faces (i, j) of each closed wrap among `patches`."""
+    return [(i, j) for i in range(len(patches)) for j in range(i + 1, len(patches)) if _twins(patches, i, j)]
+
+
+def _with_twins(patches: list[PatchFit], which: set) -> set:
+    """`which` (patch indices) with the other face of each closed wrap it has a face of."""
+    return set(which) | {t for t, q in enumerate(patches) if q.base.wrap is not None
+                         and any(patches[r].base.wrap is q.base.wrap for r in which)}
+
+
+def _twins(patches: list[PatchFit], i: int, j: int) -> bool:
+    """Whether patches i and j are the two faces of one closed wrap (`rgm.fitters.wrap`)."""
+    return patches[i].base.wrap is not None and patches[i].base.wrap is patches[j].base.wrap

@@ -324,7 +324,7 @@ def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float
         if len(chain) < 2:
             return "two shared edges would meet with no data piece between"
         try:
-            rest_pieces = fit_open_chain(chain, tol_uv)
+            rest_pieces = fit_open_chain(chain, tol_uv, band=shape.loops.band if shape.loops else None)
         except GeometryError as exc:
             return f"the rest of its loop could not be fitted ({exc})"
         rest_pieces = tuple(replace(p, ctrl=np.clip(p.ctrl, 0.0, 1.0)) for p in rest_pieces)

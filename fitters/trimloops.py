@@ -114,14 +114,41 @@ def _densify(poly: np.ndarray, per_edge: int = 4) -> np.ndarray:
     return np.vstack([pts, poly[-1:]])
 
 
-def _fit_segments(poly: np.ndarray, cuts, tol_uv: float, degree: int) -> tuple[CurveFit, ...]:
+def _fit_segments(poly: np.ndarray, cuts, tol_uv: float, degree: int, band=None) -> tuple[CurveFit, ...]:
     """B-spline pieces through the stretches poly[a:b + 1] of an open polyline between consecutive `cuts`
-    (vertex indices), each refined by knot insertion to `tol_uv` with its ends fixed on the vertices."""
+    (vertex indices), each refined by knot insertion to `tol_uv` with its ends fixed on the vertices; a
+    stretch along an end of `band` (`_on_band`) is the straight line between its ends."""
     pieces = []
     for a, b in zip(cuts[:-1], cuts[1:]):
         seg = poly[a:b + 1]
-        pieces.append(fit_curve(_densify(seg), tol_uv, degree=min(degree, len(seg) - 1), fix_ends=True))
+        if band is not None and np.isin(seg[:, 0], band).all():
+            pieces.append(_polyline_piece(seg[[0, -1]], tol_uv))
+        else:
+            pieces.append(fit_curve(_densify(seg), tol_uv, degree=min(degree, len(seg) - 1), fix_ends=True))
     return tuple(pieces)
+
+
+def _band_clipped(poly: np.ndarray, band) -> np.ndarray:
+    """A closed polygon (k, 2) with u clipped to `band` (u0, u1), each run of vertices on an end reduced to
+    its first and last (the run is a straight piece: a contour that went past the end and came back
+    would otherwise double back along it)."""
+    p = _distinct(np.c_[np.clip(poly[:, 0], *band), poly[:, 1]])
+    u = p[:, 0]
+    inner = np.isin(u, band) & (u == np.roll(u, 1)) & (u == np.roll(u, -1))
+    return p if inner.all() else p[~inner]
+
+
+def _on_band(uv: np.ndarray, band, closed: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The polyline uv (k, 2) with vertices within 1e-9 of u = u0 or u1 of `band` put exactly on it, and
+    the indices where a run of such vertices starts or ends (the cuts that make a run one straight piece)."""
+    uv = np.array(uv, float)
+    for end in band:
+        uv[np.abs(uv[:, 0] - end) <= 1e-9, 0] = end
+    on = np.isin(uv[:, 0], band)
+    before, after = np.roll(on, 1), np.roll(on, -1)
+    if not closed:
+        before[0] = after[-1] = False
+    return uv, np.flatnonzero(on & ~(before & after)) if not on.all() else np.zeros(0, int)
 
 
 def fit_closed_loop(uv: np.ndarray, tol_uv: float, degree: int = 3) -> tuple[CurveFit, ...]:
@@ -134,15 +161,19 @@ def fit_closed_loop(uv: np.ndarray, tol_uv: float, degree: int = 3) -> tuple[Cur
     return _fit_segments(rolled, np.r_[corners - corners[0], len(uv)], tol_uv, degree)
 
 
-def fit_open_chain(uv: np.ndarray, tol_uv: float, degree: int = 3) -> tuple[CurveFit, ...]:
+def fit_open_chain(uv: np.ndarray, tol_uv: float, degree: int = 3, band=None) -> tuple[CurveFit, ...]:
     """Open polyline (k, 2), k >= 2 -> consecutive B-spline pieces from its first vertex to its last
     (which they keep exactly: the chain joins what lies beyond its ends), split at its corners as a
-    closed loop is (`corner_indices`, judged away from the ends) and each refined to `tol_uv`."""
+    closed loop is (`corner_indices`, judged away from the ends) and each refined to `tol_uv`. With
+    `band` (u0, u1), its runs along u = u0 or u1 stay straight pieces on them (`fit_trim_loops`)."""
     uv = np.asarray(uv, float)
     w = 3
     inner = corner_indices(uv, window=w) if len(uv) >= 2 * w + 2 else np.zeros(0, int)
     inner = inner[(inner >= w) & (inner <= len(uv) - 1 - w)]   # a closed polygon's wrap-around is no corner
-    return _fit_segments(uv, np.r_[0, inner, len(uv) - 1], tol_uv, degree)
+    if band is not None:
+        uv, runs = _on_band(uv, band, closed=False)
+        inner = np.union1d(inner, runs[(runs > 0) & (runs < len(uv) - 1)])
+    return _fit_segments(uv, np.r_[0, inner, len(uv) - 1], tol_uv, degree, band)
 
 
 def loop_stats_max(loop: tuple[CurveFit, ...]) -> float:
@@ -274,6 +305,7 @@ class TrimLoops:
     holes: tuple[tuple[CurveFit, ...], ...]
     dropped: int  # further outer components (separate pieces of data) not covered by this face
     notes: tuple = ()   # what was done to keep the loops valid (said in the fit's notes)
+    band: tuple | None = None   # (u0, u1): the loops run straight along these iso-lines (`fit_trim_loops`)
 
 
 #: how far (in pixels) the loops run beyond a grid's outermost rows and columns, where the contour (half a
@@ -338,10 +370,13 @@ def _snapped(raw: list[np.ndarray], tree, rounds: int = 200) -> tuple[list[np.nd
     return [_distinct(p) for p in raw], int(sum(len(p) for p in raw))
 
 
-def _stretches(uv: np.ndarray) -> list[np.ndarray]:
+def _stretches(uv: np.ndarray, band=None) -> list[np.ndarray]:
     """A closed polygon (k, 2) cut at its corners (`corner_indices`) into open polylines, each from a
-    corner to the next (the last vertex of one the first of the next); one closed stretch if no corner."""
+    corner to the next (the last vertex of one the first of the next); one closed stretch if no corner.
+    With `band` (u0, u1), also cut where a run of vertices on u = u0 or u = u1 starts and ends."""
     corners = corner_indices(uv)
+    if band is not None:
+        corners = np.union1d(corners, _on_band(uv, band, closed=True)[1])
     if len(corners) == 0:
         return [np.vstack([uv, uv[:1]])]
     rolled = np.vstack([np.roll(uv, -corners[0], axis=0), uv[corners[0]]])
@@ -367,13 +402,16 @@ def _fit_stretch(seg: np.ndarray, tol_uv: float, degree: int, lo, hi, exact: boo
     return replace(piece, ctrl=np.clip(piece.ctrl, lo, hi))
 
 
-def _fit_valid(polys: list[np.ndarray], tol_uv: float, degree: int, lo, hi, rounds: int = 5):
+def _fit_valid(polys: list[np.ndarray], tol_uv: float, degree: int, lo, hi, rounds: int = 5, band=None):
     """Loops of B-spline pieces through the jointly valid polygons `polys` (outer first), each piece within
     `tol_uv`; where the fitted loops cross or touch (a fit cutting across a narrow neck or corner, a hole's
     loop meeting the outer one) the pieces involved are fitted again to half the tolerance, up to `rounds`
-    times, and failing that are the polygon's stretch itself (degree 1), which cannot cross. Returns the
-    loops and the number of pieces tightened and of pieces made polylines."""
-    stretches = [_stretches(p) for p in polys]
+    times, and failing that are the polygon's stretch itself (degree 1), which cannot cross. A stretch
+    along an end of `band` (u0, u1) is the straight line from its first vertex to its last, exactly on it.
+    Returns the loops and the number of pieces tightened and of pieces made polylines."""
+    stretches = [_stretches(p, band) for p in polys]
+    lines = [[band is not None and bool(np.isin(s[:, 0], band).all()) for s in ss] for ss in stretches]
+    stretches = [[s[[0, -1]] if line else s for s, line in zip(ss, ll)] for ss, ll in zip(stretches, lines)]
     tols = [np.full(len(s), tol_uv) for s in stretches]
     loops = [[_fit_stretch(s, tol_uv, degree, lo, hi) for s in ss] for ss in stretches]
     tightened, exact = set(), set()
@@ -394,7 +432,7 @@ def _fit_valid(polys: list[np.ndarray], tol_uv: float, degree: int, lo, hi, roun
 
 
 def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_pixels: int = 20,
-                   degree: int = 3, snap_to=None, domain=None) -> TrimLoops:
+                   degree: int = 3, snap_to=None, domain=None, band=None) -> TrimLoops:
     """Fit the boundary of `mask` (rows, cols) with closed B-spline loops in (u, v).
 
     u_of_row (rows,), v_of_col (cols,): the parameters of the grid rows and columns.
@@ -406,6 +444,9 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
     make the loops cross or touch).
     domain: optional ((u0, u1), (v0, v1)), the surface's: the loops stay in it. Where the contour meets
     the grid's border they run BORDER_REACH pixels beyond the outermost rows and columns (within the domain).
+    band: optional (u0, u1): the loops stay within u0 <= u <= u1, and where the contour reaches past either
+    they run exactly along it (straight pieces on the iso-parameter lines, not snapped to the data): a face
+    cut from a closed wrap along those lines (`rgm.fitters.wrap`), whose neighbour is the same surface past them.
 
     The loops are valid (`check_loops`): each simple, the holes inside the outer boundary and apart from it
     and each other. Pieces whose fit would cross are fitted tighter (or as the contour itself); `notes` say so.
@@ -437,15 +478,20 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
         lo, hi = np.maximum(lo, np.asarray(domain, float)[:, 0]), np.minimum(hi, np.asarray(domain, float)[:, 1])
     chosen = [polys[outer_i]] + [p for i, p in enumerate(polys) if i != outer_i and np.sign(areas[i]) != outer_sign]
     raw = [_distinct(_to_uv(p, u_of_row, v_of_col)) for p in chosen]
+    if band is not None:
+        raw = [_band_clipped(p, band) for p in raw]
     if snap_to is not None:
         from scipy.spatial import cKDTree
 
-        raw, kept = _snapped(raw, cKDTree(np.asarray(snap_to, float)))
+        snap_to = np.asarray(snap_to, float)
+        if band is not None:   # the vertices on the band's ends are their own nearest points: they stay
+            snap_to = np.vstack([snap_to] + [p[np.isin(p[:, 0], band)] for p in raw])
+        raw, kept = _snapped(raw, cKDTree(snap_to))
         if kept:
             notes.append(f"{kept} contour vertices held back from their nearest data point (the loops would "
                          f"cross or touch there: a region a cell or two wide)")
     uv = [p if (signed_area(p) > 0) == (k == 0) else p[::-1] for k, p in enumerate(raw)]
-    loops, tightened, exact = _fit_valid(uv, tol_uv, degree, lo, hi)
+    loops, tightened, exact = _fit_valid(uv, tol_uv, degree, lo, hi, band=band)
     if tightened or exact:
         notes.append(f"{tightened + exact} trimming-loop piece(s) would cross a loop at the tolerance (a narrow "
                      f"neck or sharp corner): fitted closer to the data boundary"
@@ -453,4 +499,5 @@ def fit_trim_loops(mask: np.ndarray, u_of_row, v_of_col, tol_uv: float, *, min_p
     problems = check_loops(loops[0], loops[1:])
     if problems:
         raise GeometryError(f"the trimming loops are not valid: {'; '.join(problems)}")
-    return TrimLoops(loops[0], tuple(loops[1:]), int(np.sum(sizes >= min_pixels)) - 1, tuple(notes))
+    return TrimLoops(loops[0], tuple(loops[1:]), int(np.sum(sizes >= min_pixels)) - 1, tuple(notes),
+                     None if band is None else tuple(map(float, band)))

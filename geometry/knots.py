@@ -55,7 +55,7 @@ def rescale_knots(knots: np.ndarray, degree: int, u0: float, u1: float) -> np.nd
     n = len(knots) - degree - 1
     a, b = knots[degree], knots[n]
     out = u0 + (knots - a) * ((u1 - u0) / (b - a))
-    out[degree], out[n] = u0, u1
+    out[knots == a], out[knots == b] = u0, u1    # every copy of an end knot exactly (no rounding below it)
     return out
 
 

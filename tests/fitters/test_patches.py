@@ -137,7 +137,7 @@ def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two(tmp_path)
     assert len(groups) == 3 and min(purity(groups, part)) > 0.97
     result = fit_patches(p, 0.2)
     kinds = sorted(q.base.kind for q in result.patches)
-    assert kinds == ["cylinder", "cylinder", "plane", "plane"]  # a full wrap has no gap: two halves
+    assert kinds == ["cylinder", "cylinder", "plane", "plane"]  # a full wrap has no gap: two faces
     text, parts = patches_text(result, 0.2)
     for q, part in zip(result.patches, parts):
         s = q.shape
@@ -149,11 +149,13 @@ def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two(tmp_path)
             err = np.abs(np.abs(on[:, 2]) - h / 2)
         assert np.percentile(err, 95) < 0.2
     assert all(np.isfinite(g.max) and g.max > 0 for g in result.gaps)
-    # the rims are shared (cap plane and mantle cross there), and so is the seam of the wrap's two halves:
-    # each reaches past its data, and as fitted their edges meet at 8.6 degrees, over the 8 under which
-    # surfaces count as tangent; all five are within the tolerance along the shared edge
-    assert [g.shared for g in result.gaps].count(True) == 5
+    # the four rims are shared (cap plane and mantle cross there); the wrap is one surface closed round its
+    # axis, cut into two faces along two of its iso-lines: their seams are the same curve on both, G0 to
+    # round-off (fitted as two halves apart, their edges met at 8.6 degrees and shared an intersection)
+    assert [g.shared for g in result.gaps].count(True) == 4
     assert all(g.max <= 0.2 for g in result.gaps)
+    wrap = [g for g in result.gaps if result.patches[g.i].base.wrap and result.patches[g.j].base.wrap]
+    assert len(wrap) == 1 and wrap[0].max < 1e-9 and "closed round its axis" in wrap[0].why
     model = rgm.loads(text)
     assert not [d for d in model.diagnostics if d.is_error]
     assert all(isinstance(model.objects[f"patch_{k}"], TrimmedFace) for k in range(1, 5))
@@ -252,11 +254,12 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     # shared says why. The patches of the seams still over 1 mm (9 of 21) are fitted again at 0.5 mm through
     # their common boundary curves as anchors (the midpoints between the two surfaces along both faces'
     # trims; along a shared edge, the current intersection): all 21 seams are then within the tolerance,
-    # worst 0.95 mm, 3 shared (1-6, shared after the refit when it was unheld, is now brought within by
-    # it and keeps separate trims, measured). 20 within, worst 1.23 mm (the wrap halves 1-2), 4 shared,
+    # worst 0.91 mm, 4 shared (0.95 mm, 3 shared, with the body's wrap as two halves apart). 20 within, worst 1.23 mm (the wrap halves 1-2), 4 shared,
     # with the patches that share an edge refitted without anchors; 16 with a plain refit at 0.5 mm; 7 of
-    # 18 before the surfaces reached past their data
+    # 18 before the surfaces reached past their data. The body's wrap is one surface closed round its axis,
+    # its two faces meeting along the same curve (0 mm)
     shared = [g for g in result.gaps if g.shared]
+    assert any(g.max < 1e-9 and "closed round its axis" in g.why for g in result.gaps)
     assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     within = sum(g.max <= 1.0 for g in result.gaps)
     assert within >= 21 and gaps.max() <= 1.0
@@ -287,7 +290,9 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     assert all(s.fit.stats.holds and s.fit.stats.p95 <= 1.0 for s in result.shapes)
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
-    # 33 of 42 seams within 1 mm: the patches of the loose seams refitted through common boundary curves,
+    # 37 of 42 seams within 1 mm, worst 1.77 mm, with the can's mantle one surface closed round its axis
+    # (its two faces' seams the same curve; 33 of 42, worst 2.66 mm, fitted as two halves apart): the
+    # patches of the loose seams refitted through common boundary curves,
     # those with a shared edge held to it, a refitted patch whose own seams did worse put back, in up to
     # three rounds (29 of 42 in one); 28 of 42 with each linked group's refit kept or dropped whole, 20 with
     # a plain refit at 0.5 mm, 6 of 32 before the surfaces reached past their data. Worst 2.66 mm. The
@@ -298,7 +303,7 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     print(f"meat can: {len(shared)} of {len(gaps)} seams shared ({len(curves)} as seam curves), "
           f"{sum(g <= 1.0 for g in gaps)} within 1 mm, worst {max(gaps):.2f} mm, "
           f"ctrl {[s.fit.n_ctrl for s in result.shapes]}")
-    assert sum(g <= 1.0 for g in gaps) >= 31 and max(gaps) < 4.0   # two seams of margin: figures move by machine
+    assert sum(g <= 1.0 for g in gaps) >= 35 and max(gaps) < 3.0   # two seams of margin: figures move by machine
     assert all(g.max < g.before for g in curves)
     assert all(g.why for g in result.gaps if not g.shared)
     text, _ = patches_text(result, 1.0, title="meat can")

@@ -138,3 +138,18 @@ def test_knot_helpers_and_errors():
     with pytest.raises(GeometryError, match="direction"):
         from rgm.geometry import NurbsSurface
         NurbsSurface(1, 1, [0, 0, 1, 1], [0, 0, 1, 1], np.zeros((2, 2, 3))).refine("w", [0.5])
+
+
+@SETTINGS
+@given(st.lists(st.floats(0.001, 0.999), min_size=0, max_size=8), st.floats(0, 1), st.floats(0.01, 1),
+       st.floats(-50, 50), st.floats(1e-3, 100))
+def test_rescaled_knots_keep_every_end_copy_exact(interior, a, width, u0, new_width):
+    """Every copy of an end knot maps to the new end exactly (a copy rounded below its neighbour made a
+    knot vector decrease: a closed wrap's face, cut from 1 - d to 1.5 + d, was refused)."""
+    from rgm.geometry.knots import rescale_knots
+
+    b = a + width
+    knots = clamped_knots(3, np.unique(a + np.asarray(interior) * width), (a, b))
+    for lo, hi in ((0.0, 1.0), (u0, u0 + new_width)):
+        out = rescale_knots(knots, 3, lo, hi)
+        assert np.all(out[:4] == lo) and np.all(out[-4:] == hi) and np.all(np.diff(out) >= 0)
