@@ -121,7 +121,7 @@ def _fit_segments(poly: np.ndarray, cuts, tol_uv: float, degree: int, band=None)
     pieces = []
     for a, b in zip(cuts[:-1], cuts[1:]):
         seg = poly[a:b + 1]
-        if band is not None and np.isin(seg[:, 0], band).all():
+        if _band_line(seg, band):
             pieces.append(_polyline_piece(seg[[0, -1]], tol_uv))
         else:
             pieces.append(fit_curve(_densify(seg), tol_uv, degree=min(degree, len(seg) - 1), fix_ends=True))
@@ -136,6 +136,11 @@ def _band_clipped(poly: np.ndarray, band) -> np.ndarray:
     u = p[:, 0]
     inner = np.isin(u, band) & (u == np.roll(u, 1)) & (u == np.roll(u, -1))
     return p if inner.all() else p[~inner]
+
+
+def _band_line(seg: np.ndarray, band) -> bool:
+    """Whether every vertex of the polyline `seg` lies on an end of `band` (u0, u1): a straight piece."""
+    return band is not None and bool(np.isin(seg[:, 0], band).all())
 
 
 def _on_band(uv: np.ndarray, band, closed: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -410,8 +415,7 @@ def _fit_valid(polys: list[np.ndarray], tol_uv: float, degree: int, lo, hi, roun
     along an end of `band` (u0, u1) is the straight line from its first vertex to its last, exactly on it.
     Returns the loops and the number of pieces tightened and of pieces made polylines."""
     stretches = [_stretches(p, band) for p in polys]
-    lines = [[band is not None and bool(np.isin(s[:, 0], band).all()) for s in ss] for ss in stretches]
-    stretches = [[s[[0, -1]] if line else s for s, line in zip(ss, ll)] for ss, ll in zip(stretches, lines)]
+    stretches = [[s[[0, -1]] if _band_line(s, band) else s for s in ss] for ss in stretches]
     tols = [np.full(len(s), tol_uv) for s in stretches]
     loops = [[_fit_stretch(s, tol_uv, degree, lo, hi) for s in ss] for ss in stretches]
     tightened, exact = set(), set()
