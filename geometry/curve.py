@@ -55,6 +55,11 @@ class NurbsCurve:
     def __setattr__(self, name, value):
         raise AttributeError("NurbsCurve is immutable; operations return new curves")
 
+    def __reduce__(self):
+        """Pickled by its defining data, rebuilt (and checked) by the constructor: copies to worker
+        processes and saved results stay immutable."""
+        return type(self), (self.degree, self.knots, self.ctrl, self.weights)
+
     @classmethod
     def from_homogeneous(cls, degree: int, knots, pw, rational: bool = True) -> "NurbsCurve":
         """Build from homogeneous control points `pw (n, d+1)` = (w*P, w)."""

@@ -84,6 +84,10 @@ class NurbsSurface:
     def __setattr__(self, name, value):
         raise AttributeError("NurbsSurface is immutable; operations return new surfaces")
 
+    def __reduce__(self):
+        """Pickled by its defining data, rebuilt (and checked) by the constructor (see NurbsCurve)."""
+        return type(self), (self.degree_u, self.degree_v, self.knots_u, self.knots_v, self.ctrl, self.weights)
+
     @classmethod
     def from_homogeneous(cls, degree_u, degree_v, knots_u, knots_v, pw, rational=True) -> "NurbsSurface":
         """Build from a homogeneous net `pw (nu, nv, 4)` = (w*P, w)."""

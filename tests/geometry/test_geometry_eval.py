@@ -162,6 +162,24 @@ def test_objects_are_immutable_copies():
         s.ctrl = None
 
 
+@given(curves(), surfaces())
+def test_pickled_curves_and_surfaces_come_back_the_same_and_immutable(c, s):
+    """Results holding geometry (a fitted PatchSet, a model) go to worker processes and to disk by pickle:
+    the copies evaluate bit for bit as the originals and are as immutable (rebuilt by the constructor)."""
+    import pickle
+
+    c2, s2 = pickle.loads(pickle.dumps(c)), pickle.loads(pickle.dumps(s))
+    t = np.linspace(*c.domain, 7)
+    assert np.array_equal(c2.evaluate(t), c.evaluate(t)) and (c2.weights is None) == (c.weights is None)
+    (u0, u1), (v0, v1) = s.domain
+    u, v = np.linspace(u0, u1, 5), np.linspace(v0, v1, 5)
+    assert np.array_equal(s2.evaluate(u, v), s.evaluate(u, v))
+    with pytest.raises(AttributeError):
+        c2.degree = 1
+    with pytest.raises(ValueError):
+        s2.ctrl[0, 0, 0] = 1.0
+
+
 def test_transform_bbox_and_spans():
     rng = np.random.default_rng(5)
     c = NurbsCurve(3, uniform_knots(3, 6), rng.uniform(-1, 1, (6, 3)), rng.uniform(0.5, 2, 6))
