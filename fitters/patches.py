@@ -69,7 +69,8 @@ merged views of a closed or wrapped part:
    loops), the shared intersections kept as they were; the set is kept if it scores better. A closed
    wrap's two faces are refitted together, as one surface; when a round brings nothing, it is tried
    again with the wraps held as fixed neighbours. YCB mustard bottle at 1 mm: all 21 seams within,
-   worst 0.91 mm, 4 shared; potted meat can: 37 of 42 within, worst 1.77 mm. The figures move with the
+   worst 0.91 mm, 4 shared; potted meat can: 37 of 42 within, worst 1.77 mm (32 of 41, worst 1.81 mm, on
+   another machine: floating-point differences steer the discrete choices). The figures move with the
    views: with the views' noise drawn from seeds 2, 3, 4 instead of 1, the mustard bottle has 10 of 12
    (worst 1.64 mm), 14 of 14 and 17 of 17 seams within, the meat can 31 of 52, 30 of 40 and 34 of 50
    (worst 2.7-3.5 mm). Before the wraps were closed (two halves apart, parameterised each over its own
