@@ -33,6 +33,10 @@ SCHEMAS = {"AP214": "AP214IS", "AP203": "AP203", "AP242": "AP242DIS"}
 UNITS = {"mm": "MM", "cm": "CM", "m": "M", "in": "INCH"}
 #: Precision written into the file (model units): edge/vertex tolerances are kept at or below this.
 PRECISION = 1e-7
+#: 3-D trimming curves are projected onto their surface to this share of the tolerance: at the tolerance
+#: itself the pcurve of a seam curve across a densely knotted fitted surface (39 x 35 control points)
+#: looped back on itself and OpenCASCADE refused the wire, and it took 25 times longer
+_PROJECTION = 0.01
 
 
 def _quiet():
@@ -187,11 +191,20 @@ def _wire(edges):
 
 def _occ_intersection(curve):
     """Branches of ``curve.a ∩ curve.b`` by ``GeomInt_IntSS`` at the file precision (PRECISION, not the
-    model's tolerance: the lazy intersection is approximated here, as finely as the file can hold):
-    list of (3-D curve, pcurve on a, on b)."""
+    model's tolerance: the lazy intersection is approximated here, as finely as the file can hold), or
+    at 10 or 100 times it where OpenCASCADE's approximation fails at that (two YCB meat can patches whose
+    surfaces nearly touch): list of (3-D curve, pcurve on a, on b)."""
     from OCP.GeomInt import GeomInt_IntSS
 
-    inter = GeomInt_IntSS(surface_geom(curve.a), surface_geom(curve.b), PRECISION, True, True, True)
+    a, b = surface_geom(curve.a), surface_geom(curve.b)
+    for k in range(3):
+        try:
+            inter = GeomInt_IntSS(a, b, PRECISION * 10**k, True, True, True)
+            break
+        except Exception:   # OCP raises OpenCASCADE's Standard_* errors as plain exceptions: here its
+            # approximation failing ("BSpline curve: Knots interval values too close")
+            if k == 2:
+                raise BackendError(f"OpenCASCADE's intersector failed on {_label(curve)}") from None
     if not inter.IsDone() or inter.NbLines() == 0:
         raise BackendError(f"OpenCASCADE found no intersection for {_label(curve)}")
     return [(inter.Line(i), inter.LineOnS1(i), inter.LineOnS2(i)) for i in range(1, inter.NbLines() + 1)]
@@ -266,7 +279,7 @@ def _pcurve_pieces(loop, surface, tol):
             for edge in _edges_of(piece):
                 c3, t0, t1 = BRep_Tool.Curve_s(edge, 0.0, 1.0), BRep_Tool.Parameter_s(
                     TopExp.FirstVertex_s(edge), edge), BRep_Tool.Parameter_s(TopExp.LastVertex_s(edge), edge)
-                c2 = GeomProjLib.Curve2d_s(c3, t0, t1, surface_geom(surface), tol)
+                c2 = GeomProjLib.Curve2d_s(c3, t0, t1, surface_geom(surface), _PROJECTION * tol)
                 pieces.append((c2, c2.FirstParameter(), c2.LastParameter(), None))
     out = []
     for k, (c, t0, t1, inter) in enumerate(pieces):
@@ -310,6 +323,25 @@ def _pcurve_pieces(loop, surface, tol):
         else:
             out[0] = _moved_end(out[0], best.Value(tb), False)
         out.append((Geom2d_TrimmedCurve(best, ta, tb), ta, tb))
+    return _snapped_joins(out)
+
+
+def _snapped_joins(pieces, gap: float = 1e-6):
+    """Pcurve pieces (Geom2d_Curve, t0, t1) of a closed loop with each join closer than `gap` (in (u, v))
+    made exact: a piece's end moved onto the next one's start, or that start onto the end where the end
+    cannot move (`_moved_end`). Projected 3-D pieces meet their neighbours to about 1e-9 in (u, v), which
+    on a surface a few hundred millimetres across is over the wire's PRECISION: OpenCASCADE then joined the
+    edges but found the face unorientable."""
+    out = list(pieces)
+    for k in range(len(out)):
+        nxt = (k + 1) % len(out)
+        end, start = out[k][0].Value(out[k][2]), out[nxt][0].Value(out[nxt][1])
+        if 0.0 < end.Distance(start) < gap:
+            moved = _moved_end(out[k], start, True)
+            if moved is out[k]:
+                out[nxt] = _moved_end(out[nxt], end, False)
+            else:
+                out[k] = moved
     return out
 
 

@@ -32,7 +32,7 @@ from scipy.interpolate import BSpline
 
 from rgm.errors import GeometryError
 from rgm.fitters.certificate import Certificate, certify
-from rgm.geometry.basis import basis_functions, find_spans
+from rgm.geometry.basis import basis_derivatives_t, basis_functions, find_spans
 from rgm.geometry.knots import uniform_knots
 
 
@@ -338,6 +338,66 @@ class Anchors:
         return np.linalg.norm(self.basis(ku, kv, p, q).evaluate(ctrl) - self.xyz, axis=1)
 
 
+@dataclass(frozen=True)
+class Extension:
+    """Where the unit parameter square holds no data: the surface there (a patch reaches past its data to meet
+    its neighbours) continues its data bending no more than they do. `uv` (k, 2): the midpoints of a square
+    grid over [0, 1]^2 farther from every data parameter than 1.5 cells and 1.5 data spacings, each standing
+    for `area` of the domain; `weight` per data point of their thin-plate energy (`solve_scattered`), sum area
+    (|S_uu|^2 + 2 |S_uv|^2 + |S_vv|^2) (model units squared, parameters over [0, 1]). Without it a net whose
+    spans reach past the data is decided there only by how the data's noise extrapolates: a small patch's
+    surface ran up to 90 times its size away, folding back across its own seams."""
+
+    uv: np.ndarray
+    area: float
+    weight: float = 0.0
+    covered: np.ndarray | None = None   # the grid's other samples: where the data are
+
+    @classmethod
+    def of(cls, u, v, resolution: int = 48) -> "Extension":
+        """The empty and covered samples of the parameters (u, v) (n,) (weight 0: `weighed`)."""
+        from scipy.spatial import cKDTree
+
+        uv = np.column_stack([u, v])
+        tree = cKDTree(uv)
+        spacing = float(np.median(tree.query(uv, k=2)[0][:, 1])) if len(uv) > 1 else 0.0
+        g = (np.arange(resolution) + 0.5) / resolution
+        grid = np.stack(np.meshgrid(g, g, indexing="ij"), axis=-1).reshape(-1, 2)
+        far = tree.query(grid, distance_upper_bound=1.5 * max(1.0 / resolution, spacing))[0] == np.inf
+        return cls(grid[far], 1.0 / resolution**2, 0.0, grid[~far])
+
+    def weighed(self, ctrl, ku, kv, p: int, q: int, tol: float, share: float) -> "Extension":
+        """This extension weighed against the surface (control net (nu, nv, 3) on ku, kv) fitted without it:
+        a continuation bending as much per unit area as that surface does over its data costs a data point
+        `share` tol^2 (and one ten times wilder a hundred times that). The data's bending is taken at
+        least tol^2 per unit area (flat data: the continuation stays about as flat)."""
+        if not len(self.uv) or self.covered is None or not len(self.covered):
+            return self
+        C = ctrl.reshape(-1, 3)
+        inside = Extension(self.covered, self.area)
+        bending = float(np.einsum("id,id->", C, inside.energy(ku, kv, p, q) @ C)) / (len(self.covered) * self.area)
+        weight = share * tol**2 / (len(self.uv) * self.area * max(bending, tol**2))
+        return Extension(self.uv, self.area, weight, None)
+
+    def energy(self, ku, kv, p: int, q: int) -> sp.csr_matrix:
+        """The thin-plate energy's matrix E (nu nv, nu nv): sum over the samples of the energy of the
+        surface with control net C is trace(C' E C)."""
+        nu, nv = len(ku) - p - 1, len(kv) - q - 1
+        u, v = self.uv[:, 0], self.uv[:, 1]
+        su, sv = find_spans(ku, p, u), find_spans(kv, q, v)
+        du, dv = basis_derivatives_t(ku, p, u, 2, su), basis_derivatives_t(kv, q, v, 2, sv)  # (3, p+1, k)
+        first = (su - p) * nv + (sv - q)
+        cols = first[:, None] + (np.arange(p + 1)[:, None] * nv + np.arange(q + 1)[None, :]).ravel()
+        k = len(u)
+        E = sp.csr_matrix((nu * nv, nu * nv))
+        for a, b, c in ((2, 0, 1.0), (1, 1, 2.0), (0, 2, 1.0)):
+            vals = (du[a].T[:, :, None] * dv[b].T[:, None, :]).reshape(k, -1)
+            D = sp.csr_matrix((vals.ravel(), cols.ravel(), np.arange(0, vals.size + 1, vals.shape[1])),
+                              shape=(k, nu * nv))
+            E = E + c * self.area * (D.T @ D)
+        return E
+
+
 #: the densest net the surface loop builds: one control point per this many data points
 DATA_PER_CTRL = 2.0
 #: weight of the bending energy per data point at that density (dimensionless: see `_penalty`)
@@ -379,14 +439,16 @@ def closure_u(ku, p: int, nu: int, nv: int) -> sp.csr_matrix:
     return sp.kron(tu, sp.identity(nv), format="csr")
 
 
-def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING, anchors=None, closed_u: bool = False):
+def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING, anchors=None, closed_u: bool = False,
+                    extension: Extension | None = None):
     """Least-squares control net (nu, nv, 3) for scattered points (n, 3) at parameters (u, v), minimising
     sum |S(u_i, v_i) - P_i|^2 + n * w * (bending energy along u + along v) (see `_bending`), w the
     `_penalty` of `smoothing`: a penalty on the surface, not on its net. `anchors` (`Anchors`) add
     sum weight |S(uv_a) - xyz_a|^2: points the surface is to pass through at fixed parameters (a penalty
     constraint, such as a boundary curve shared with a neighbour, `rgm.fitters.patches`), not data.
     `closed_u`: the net is closed C1 across u = 0 / u = 1 (`closure_u`), exactly, for a surface that
-    wraps round. Returns (ctrl, basis)."""
+    wraps round. `extension` (`Extension`) adds n * weight times the thin-plate energy where the domain
+    has no data. Returns (ctrl, basis)."""
     basis = ScatteredBasis.build(np.asarray(u, float), np.asarray(v, float), ku, kv, p, q)
     nu, nv = basis.shape
     M, rhs = basis.normal_equations(points)
@@ -398,6 +460,8 @@ def solve_scattered(u, v, points, ku, kv, p, q, smoothing=SMOOTHING, anchors=Non
     w = len(points) * _penalty(smoothing, nu * nv, len(points))
     R = w * iu**3 / iv * sp.kron(Ru, sp.identity(nv)) + w * iv**3 / iu * sp.kron(sp.identity(nu), Rv)
     M = M + R
+    if extension is not None and len(extension.uv):
+        M = M + len(points) * extension.weight * extension.energy(ku, kv, p, q)
     if closed_u:
         T = closure_u(ku, p, nu, nv)
         M, rhs = T.T @ M @ T, T.T @ rhs

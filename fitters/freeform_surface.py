@@ -28,14 +28,18 @@ from __future__ import annotations
 import numpy as np
 
 from rgm.errors import GeometryError
-from rgm.fitters.freeform import (DATA_PER_CTRL, SMOOTHING, ScatteredBasis, SurfaceFit, _span_index, _split_candidates,
-                                  design_matrix, fit_stats, grid_parameters, plane_parameters, refinement_matrix,
-                                  solve_grid, solve_scattered, statistic_value)
+from rgm.fitters.freeform import (DATA_PER_CTRL, SMOOTHING, Extension, ScatteredBasis, SurfaceFit, _span_index,
+                                  _split_candidates, design_matrix, fit_stats, grid_parameters, plane_parameters,
+                                  refinement_matrix, solve_grid, solve_scattered, statistic_value)
 from rgm.fitters.freeform_measure import foot_distances
 from rgm.geometry.knots import uniform_knots
 
 __all__ = ["fit_surface", "initial_net_size"]
 
+#: what a data point's residual may cost (in tol^2) for the continuation where no data are to bend as much as
+#: the data do (`Extension.weighed`): small, so the data decide the surface and the continuation only
+#: stays as calm as they are
+EXTENSION = 0.01
 _SAMPLE = 2000   # far points whose foot points tell whether computing all of theirs can decide anything
 
 
@@ -77,7 +81,7 @@ class _SurfaceProblem:
     def __init__(self, points, mask, params, degree, smoothing, statistic, anchors=None, closed_u=False):
         pts = np.asarray(points, float)
         self.degree, self.smoothing, self.statistic, self.grid = degree, smoothing, statistic, None
-        self.anchors, self.closed_u = anchors, closed_u
+        self.anchors, self.closed_u, self._extension = anchors, closed_u, None
         if (anchors is not None or closed_u) and pts.ndim == 3:
             raise GeometryError("anchor points and closed nets need scattered data (a grid is solved separably)")
         if pts.ndim == 3:
@@ -103,6 +107,24 @@ class _SurfaceProblem:
             self.data = pts
             self.lines = None
             self.char = (None, None)
+        self.extended = pts.ndim == 2   # a range image's cells are its data: no continuation to hold
+
+    def extension(self, ku, kv, tol: float) -> Extension | None:
+        """The `Extension` of scattered data (None for a range grid, or once `extended` is switched off),
+        weighed at tolerance `tol` against the surface fitted without it on the first knot vectors asked
+        for (`Extension.weighed`, share EXTENSION), then kept for the whole refinement: one weight, so
+        knot insertion compares like with like."""
+        if not self.extended:
+            return None
+        if self._extension is None or self._extension[0] != tol:
+            ext = Extension.of(self.u, self.v)
+            if len(ext.uv):
+                p = self.degree
+                plain = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing, self.anchors,
+                                        self.closed_u)[0]
+                ext = ext.weighed(plain, ku, kv, p, p, tol, EXTENSION)
+            self._extension = (tol, ext)
+        return self._extension[1]
 
     def anchors_met(self, ku, kv, ctrl) -> bool:
         """Whether the anchors (if refined for: `Anchors.tol`) are within their tolerance at p95."""
@@ -118,7 +140,7 @@ class _SurfaceProblem:
             ctrl = solve_grid(self.ug, self.vg, self.grid, ku, kv, p, p, self.smoothing)[0]
         else:
             ctrl = solve_scattered(self.u, self.v, self.data, ku, kv, p, p, self.smoothing, self.anchors,
-                                   self.closed_u)[0]
+                                   self.closed_u, self.extension(ku, kv, tol))[0]
         return ctrl, self.residuals(ku, kv, ctrl, tol)
 
     def residuals(self, ku, kv, ctrl, tol):
@@ -222,8 +244,26 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
     insertion step is bisected (the fewest of its knots, worst spans first, that still meet it); then
     knots whose neighbourhood is far inside the tolerance are removed in one batch, and up to `prune`
     single knots, quietest first, each only when the fit still holds without it.
+    Scattered data are fitted with their `Extension`: where the unit parameter
+    square has no data the surface is held to bend no more than over its data, so a patch that reaches
+    past its data continues it calmly instead of as its noise extrapolates. Where that fit misses the
+    tolerance, the fit without it is tried and kept if it holds or comes closer: the extension never
+    costs a certificate.
     """
     prob = _SurfaceProblem(points, mask, params, degree, smoothing, statistic, anchors, closed_u)
+    fit = _refine(prob, tol, n_initial, max_ctrl, statistic, prune, min_lines, data_per_ctrl)
+    if not fit.stats.holds and prob.extended:
+        prob.extended = False
+        plain = _refine(prob, tol, n_initial, max_ctrl, statistic, prune, min_lines, data_per_ctrl)
+        if plain.stats.holds or plain.stats.value < fit.stats.value:
+            fit = plain
+    return fit
+
+
+def _refine(prob, tol, n_initial, max_ctrl, statistic, prune, min_lines, data_per_ctrl) -> SurfaceFit:
+    """The refinement of `fit_surface` on one problem: knot insertion from the initial net until the
+    statistic holds or a limit stops it, then bisection of the last step and pruning."""
+    degree = prob.degree
     limit = max((degree + 1) ** 2, int(len(prob.data) / data_per_ctrl))
     ku = kv = uniform_knots(degree, n_initial or initial_net_size(*prob.char, degree, len(prob.data)))
     prev, history, stopped, step, final = None, [], "", None, ""

@@ -68,14 +68,16 @@ merged views of a closed or wrapped part:
    lies within the tolerance of both (`rgm.fitters.seam_curves`: `seam_i_j := bspline(...)` in both
    loops), the shared intersections kept as they were; the set is kept if it scores better. A closed
    wrap's two faces are refitted together, as one surface; when a round brings nothing, it is tried
-   again with the wraps held as fixed neighbours. YCB mustard bottle at 1 mm: all 21 seams within,
-   worst 0.91 mm, 4 shared; potted meat can: 37 of 42 within, worst 1.77 mm (32 of 41, worst 1.81 mm, on
-   another machine: floating-point differences steer the discrete choices). The figures move with the
-   views: with the views' noise drawn from seeds 2, 3, 4 instead of 1, the mustard bottle has 10 of 12
-   (worst 1.64 mm), 14 of 14 and 17 of 17 seams within, the meat can 31 of 52, 30 of 40 and 34 of 50
-   (worst 2.7-3.5 mm). Before the wraps were closed (two halves apart, parameterised each over its own
-   angle): mustard 21 of 21, 12 of 12, 12 of 15 (the wrap's seam 2.82 mm), 18 of 18; meat can 33 of 42,
-   29 of 53, 33 of 40, 29 of 49.
+   again with the wraps held as fixed neighbours. Every surface is held, where it reaches past its data, to
+   bend no more than over them (`rgm.fitters.freeform.Extension`), so neighbours that must cross do not run
+   off instead. YCB mustard bottle at 1 mm, the views' noise from seeds 1-4: 21 of 21, 12 of 12, 14 of 14,
+   17 of 17 seams within (worst 0.64-0.78 mm); potted meat can: 37 of 41, 45 of 51, 27 of 40, 38 of 50
+   (worst 1.45-3.52 mm). Without the extension, on the same machine: mustard 21/21, 10/12 (worst 1.64 mm),
+   14/14, 17/17; meat can 32/41, 31/52, 31/40, 36/50 (worst 1.81-3.47 mm); the figures move with the
+   machine too (floating-point differences steer the discrete choices: 37 of 42 for the meat can, seed 1,
+   on another). Before the wraps were closed (two halves apart, parameterised each over its own angle):
+   mustard 21 of 21, 12 of 12, 12 of 15 (the wrap's seam 2.82 mm), 18 of 18; meat can 33 of 42, 29 of 53,
+   33 of 40, 29 of 49.
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """

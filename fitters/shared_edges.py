@@ -28,7 +28,10 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    may run from one onto the other, and a back end taking the branch nearest both joins then misses one
    (the meat can's patches 4 and 9: 0.57 mm apart, OpenCASCADE's edge 2.33 mm from a join). So every
    stretch must also lie on one branch of the intersection approximated at a tenth of the tolerance,
-   and that branch must be the nearest one at both joins.
+   and that branch must be the nearest one at both joins; and neither that branch nor the first may
+   loop back on itself along the stretch in either surface's parameters (surfaces that nearly touch
+   cross in small loops: on the meat can, with other views, OpenCASCADE's edge crossed itself there and
+   the face was refused).
 3. Loops (`rebuild_loop`): the loop's run is replaced by a `SharedEdge` piece and the rest of the loop,
    from the data as before, is re-fitted from join to join (`rgm.fitters.trimloops.fit_open_chain`: split
    at corners, ends fixed on the joins) after dropping the data samples the shared edge covers. Two shared
@@ -58,6 +61,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rgm.errors import GeometryError
+from rgm.fitters.trimloops import crosses_itself
 
 __all__ = ["SharedEdge", "share_boundaries", "rebuild_loop", "measure_shared"]
 
@@ -274,10 +278,22 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
                           for br in fine]).reshape(len(fine), len(k))
     # one fine branch holds the whole stretch and is the nearest one at both joins (where two branches
     # pass close by, a back end picks the branch nearest the joins: it must be this one)
-    if not any(np.all(d <= tol) and np.all(near_fine[:, [0, -1]].argmin(axis=0) == b) for b, d in enumerate(near_fine)):
+    nearest = near_fine[:, [0, -1]].argmin(axis=0)
+    holding = [b for b, d in enumerate(near_fine) if np.all(d <= tol) and np.all(nearest == b)]
+    if not holding:
         return ("their intersection's branches change when approximated at a tenth of the tolerance (the "
                 "surfaces nearly touch near the seam, or two branches pass close by): an exact intersector "
                 "would not find this edge")
+    # nor may the stretch loop back on itself in either surface's parameters, coarse or fine (surfaces that
+    # nearly touch cross in small loops: OpenCASCADE's edge then crossed itself, and the face was refused)
+    fb = fine[holding[0]]
+    tf = np.linspace(*fb.curve.domain, _BRANCH)
+    on = cKDTree(fb.curve.evaluate(tf)).query(xyz[k])[1]
+    tf = tf[on.min():on.max() + 1]
+    images = (uv[i][lo:hi + 1], uv[j][lo:hi + 1], fb.uv_a.evaluate(tf), fb.uv_b.evaluate(tf))
+    if any(crosses_itself(w) for w in images):
+        return ("their intersection loops back on itself along the seam (the surfaces nearly touch there): "
+                "an edge along it would cross itself")
     return _Candidate(i, j, xyz, uv, lo, hi, runs, rising, branches)
 
 

@@ -239,6 +239,14 @@ def is_simple(poly: np.ndarray) -> bool:
     return len(crossing_pairs([_distinct(poly)])) == 0
 
 
+def crosses_itself(chain: np.ndarray) -> bool:
+    """Whether an open polyline (k, 2) crosses or touches itself (repeated consecutive vertices aside)."""
+    chain = np.asarray(chain, float)
+    chain = chain[np.r_[True, np.any(np.diff(chain, axis=0) != 0, axis=1)]]
+    pairs = crossing_pairs([chain])     # closed: the edge from the last vertex back to the first is not its own
+    return bool(np.any((pairs[:, [1, 3]] < len(chain) - 1).all(axis=1)))
+
+
 def _inside(point: np.ndarray, poly: np.ndarray) -> bool:
     """Whether `point` (2,) lies inside the closed polygon (k, 2) (even-odd rule)."""
     x, y = point

@@ -203,3 +203,29 @@ def test_unlowerable_objects_are_clear_errors():
         occ.to_shape(Plane([0, 0, 0], [0, 0, 1]))
     with pytest.raises(BackendError, match="parameter-space"):
         occ.to_shape(Line([0, 0], [1, 1]))
+
+
+def test_loop_joins_off_by_round_off_are_made_exact_and_real_gaps_are_left():
+    """`_snapped_joins`: pcurve pieces whose joins miss by round-off (a projected 3-D piece meets its
+    neighbours to about 1e-9 in (u, v), over the wire's precision on a part a few hundred mm across)
+    are made to meet exactly, a B-spline's end pole or a segment moved; a gap of 1e-3 is not hidden."""
+    from OCP.GCE2d import GCE2d_MakeSegment
+    from OCP.Geom2d import Geom2d_BSplineCurve
+    from OCP.gp import gp_Pnt2d
+
+    from rgm.backends.occ import _geom2d_pieces, _snapped_joins
+
+    def segment(a, b):
+        c = GCE2d_MakeSegment(gp_Pnt2d(*a), gp_Pnt2d(*b)).Value()
+        return c, c.FirstParameter(), c.LastParameter()
+
+    arc = _geom2d_pieces(BSplineCurve(NurbsCurve(3, [0, 0, 0, 0, 1, 1, 1, 1],
+                                                 [[1, 0], [1.2, 0.4], [0.8, 0.8], [1, 1 + 3e-9]])))
+    assert isinstance(arc[0][0], Geom2d_BSplineCurve)
+    loop = [segment((0, 0), (1, 0)), *arc, segment((1, 1), (0, 1)), segment((0, 1), (0, 2e-9))]
+    out = _snapped_joins(loop)
+    for (c, _, t1), (d, t0, _) in zip(out, out[1:] + out[:1]):
+        assert c.Value(t1).Distance(d.Value(t0)) == 0.0
+    apart = [segment((0, 0), (1, 0)), segment((1, 1e-3), (0, 1)), segment((0, 1), (0, 0))]
+    out = _snapped_joins(apart)
+    assert out[0][0].Value(out[0][2]).Distance(out[1][0].Value(out[1][1])) == pytest.approx(1e-3)

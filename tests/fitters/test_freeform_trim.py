@@ -9,8 +9,8 @@ from hypothesis import strategies as st
 
 from rgm.errors import GeometryError
 from rgm.fitters.freeform import design_matrix
-from rgm.fitters.trimloops import (check_loops, crossing_pairs, fit_trim_loops, is_simple, loop_stats_max,
-                                   mask_contours, signed_area)
+from rgm.fitters.trimloops import (check_loops, crosses_itself, crossing_pairs, fit_trim_loops, is_simple,
+                                   loop_stats_max, mask_contours, signed_area)
 
 
 def loop_points(loop, m=500):
@@ -94,6 +94,11 @@ def test_validity_check_finds_crossings_touches_and_stray_holes():
     phi = np.linspace(0, 2 * np.pi, 5000, endpoint=False)
     dense = np.c_[np.cos(phi), np.sin(phi)]
     assert is_simple(dense) and not is_simple(np.vstack([dense, [[0.5, 1.5], [0.5, -1.5]]]))
+    # an open chain (an intersection's stretch in a surface's parameters): its ends may lie anywhere; a
+    # small loop in it is found, a repeated sample is not a touch
+    arc = np.c_[np.linspace(0, 1, 400), 0.1 * np.sin(3 * np.linspace(0, 1, 400))]
+    assert not crosses_itself(arc) and not crosses_itself(np.repeat(arc, 2, axis=0))
+    assert crosses_itself(np.r_[arc[:200], [[0.52, 0.2], [0.49, 0.2]], arc[200:]])
 
 
 @pytest.mark.parametrize("seed", [9, 10])   # the plain fit: its hole crosses the outer loop (9), itself (10)

@@ -252,12 +252,13 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     # the bottom, shoulder and cap creases are shared where the surfaces cross (each reaches past its data,
     # so no domain edge clamps the intersection): within the tolerance along the edge; every pair not
     # shared says why. The patches of the seams still over 1 mm (9 of 21) are fitted again at 0.5 mm through
-    # their common boundary curves as anchors (the midpoints between the two surfaces along both faces'
-    # trims; along a shared edge, the current intersection): all 21 seams are then within the tolerance,
-    # worst 0.91 mm, 4 shared (0.95 mm, 3 shared, with the body's wrap as two halves apart). 20 within, worst 1.23 mm (the wrap halves 1-2), 4 shared,
-    # with the patches that share an edge refitted without anchors; 16 with a plain refit at 0.5 mm; 7 of
-    # 18 before the surfaces reached past their data. The body's wrap is one surface closed round its axis,
-    # its two faces meeting along the same curve (0 mm)
+    # their common boundary curves as anchors (the midpoints between the two surfaces along both faces' trims;
+    # along a shared edge, the current intersection): all 21 seams are then within the tolerance, worst 0.64
+    # mm, 4 shared, with each surface held past its data to bend no more than over them (`Extension`; worst
+    # 0.91 mm without; 0.95 mm, 3 shared, with the body's wrap as two halves apart). 20 within, worst 1.23 mm
+    # (the wrap halves 1-2), 4 shared, with the patches that share an edge refitted without anchors; 16 with a
+    # plain refit at 0.5 mm; 7 of 18 before the surfaces reached past their data. The body's wrap is one
+    # surface closed round its axis, its two faces meeting along the same curve (0 mm)
     shared = [g for g in result.gaps if g.shared]
     assert any(g.max < 1e-9 and "closed round its axis" in g.why for g in result.gaps)
     assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
@@ -284,13 +285,18 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     branch and a small closed loop where the surfaces nearly touch (OpenCASCADE splits them, and its edge
     missed the joins by 4.47 mm): such a stretch is not shared; patches 4 and 9, whose stretch marched at
     the tolerance ran from one branch onto another passing 0.57 mm away (OpenCASCADE's edge missed a join
-    by 2.33 mm): not shared either."""
+    by 2.33 mm): not shared either; patch 4 (39 x 35 control points), the pcurve of whose seam curve,
+    projected onto it at the tolerance, looped back on itself (OpenCASCADE refused the wire): the back end
+    projects at a hundredth of it."""
     p = ycb_views(MEAT_CAN)
     result = fit_patches(p, 1.0, statistic="p95")
     assert all(s.fit.stats.holds and s.fit.stats.p95 <= 1.0 for s in result.shapes)
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
-    # 37 of 42 seams within 1 mm, worst 1.77 mm, with the can's mantle one surface closed round its axis
+    # 37 of 41 seams within 1 mm, worst 2.64 mm, with each surface held past its data to bend no more than
+    # over them (`Extension`; 32 of 41, worst 1.81 mm, without; seeds 2-4 of the views 45/51, 27/40, 38/50
+    # against 31/52, 31/40, 36/50). Before that: 37 of 42, worst 1.77 mm, with the can's mantle one surface
+    # closed round its axis
     # (its two faces' seams the same curve; 33 of 42, worst 2.66 mm, fitted as two halves apart): the
     # patches of the loose seams refitted through common boundary curves,
     # those with a shared edge held to it, a refitted patch whose own seams did worse put back, in up to
@@ -304,7 +310,8 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
           f"{sum(g <= 1.0 for g in gaps)} within 1 mm, worst {max(gaps):.2f} mm, "
           f"ctrl {[s.fit.n_ctrl for s in result.shapes]}")
     # the figures move by machine (floating-point differences steer discrete choices: the segmentation's
-    # pieces, the knots inserted): 37 of 42, worst 1.77 mm, on one; 32 of 41, worst 1.81 mm, on another
+    # pieces, the knots inserted): without the extension 37 of 42, worst 1.77 mm, on one; 32 of 41, worst
+    # 1.81 mm, on another
     assert sum(g <= 1.0 for g in gaps) >= 30 and max(gaps) < 3.0
     assert all(g.max < g.before for g in curves)
     assert all(g.why for g in result.gaps if not g.shared)
