@@ -263,10 +263,13 @@ class ScatteredBasis:
     shape: tuple       # (nu, nv)
 
     @classmethod
-    def build(cls, u, v, ku, kv, p, q) -> "ScatteredBasis":
+    def build(cls, u, v, ku, kv, p, q, derivative: tuple[int, int] = (0, 0)) -> "ScatteredBasis":
+        """The basis at (u, v), or its partial derivative d^a/du^a d^b/dv^b for `derivative` (a, b)."""
         nu, nv = len(ku) - p - 1, len(kv) - q - 1
         su, sv = find_spans(ku, p, u), find_spans(kv, q, v)
-        bu, bv = basis_functions(ku, p, u, su), basis_functions(kv, q, v, sv)
+        a, b = derivative
+        bu = basis_derivatives_t(ku, p, u, a, su)[a].T if a else basis_functions(ku, p, u, su)
+        bv = basis_derivatives_t(kv, q, v, b, sv)[b].T if b else basis_functions(kv, q, v, sv)
         first = (su - p) * nv + (sv - q)
         offsets = (np.arange(p + 1)[:, None] * nv + np.arange(q + 1)[None, :]).ravel()
         vals = (bu[:, :, None] * bv[:, None, :]).reshape(len(u), -1)
@@ -376,26 +379,19 @@ class Extension:
             return self
         C = ctrl.reshape(-1, 3)
         inside = Extension(self.covered, self.area)
-        bending = float(np.einsum("id,id->", C, inside.energy(ku, kv, p, q) @ C)) / (len(self.covered) * self.area)
+        bending = float(np.einsum("id,id->", C, inside.energy(ku, kv, p, q) @ C))
+        bending /= len(self.covered) * self.area
         weight = share * tol**2 / (len(self.uv) * self.area * max(bending, tol**2))
         return Extension(self.uv, self.area, weight, None)
 
     def energy(self, ku, kv, p: int, q: int) -> sp.csr_matrix:
         """The thin-plate energy's matrix E (nu nv, nu nv): sum over the samples of the energy of the
         surface with control net C is trace(C' E C)."""
-        nu, nv = len(ku) - p - 1, len(kv) - q - 1
         u, v = self.uv[:, 0], self.uv[:, 1]
-        su, sv = find_spans(ku, p, u), find_spans(kv, q, v)
-        du, dv = basis_derivatives_t(ku, p, u, 2, su), basis_derivatives_t(kv, q, v, 2, sv)  # (3, p+1, k)
-        first = (su - p) * nv + (sv - q)
-        cols = first[:, None] + (np.arange(p + 1)[:, None] * nv + np.arange(q + 1)[None, :]).ravel()
-        k = len(u)
-        E = sp.csr_matrix((nu * nv, nu * nv))
+        E = None
         for a, b, c in ((2, 0, 1.0), (1, 1, 2.0), (0, 2, 1.0)):
-            vals = (du[a].T[:, :, None] * dv[b].T[:, None, :]).reshape(k, -1)
-            D = sp.csr_matrix((vals.ravel(), cols.ravel(), np.arange(0, vals.size + 1, vals.shape[1])),
-                              shape=(k, nu * nv))
-            E = E + c * self.area * (D.T @ D)
+            D = ScatteredBasis.build(u, v, ku, kv, p, q, (a, b)).matrix()
+            E = c * self.area * (D.T @ D) if E is None else E + c * self.area * (D.T @ D)
         return E
 
 
