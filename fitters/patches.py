@@ -70,9 +70,11 @@ merged views of a closed or wrapped part:
    wrap's two faces are refitted together, as one surface; when a round brings nothing, it is tried
    again with the wraps held as fixed neighbours. Every surface is held, where it reaches past its data, to
    bend no more than over them (`rgm.fitters.freeform.Extension`), so neighbours that must cross do not run
-   off instead. YCB mustard bottle at 1 mm, the views' noise from seeds 1-4: 21 of 21, 12 of 12, 14 of 14,
-   17 of 17 seams within (worst 0.64-0.78 mm); potted meat can: 37 of 41, 45 of 51, 27 of 40, 38 of 50
-   (worst 1.45-3.52 mm). Without the extension, on the same machine: mustard 21/21, 10/12 (worst 1.64 mm),
+   off instead. YCB mustard bottle at 1 mm, the views' noise from seeds 1-4: 21 of 21, 11 of 12 (a corner
+   seam of 3 samples, 1.15 mm), 14 of 14, 17 of 17 seams within (worst 0.64-0.79 mm otherwise); potted
+   meat can: 37 of 41, 46 of 52, 29 of 40, 42 of 50 (worst 2.12-2.33 mm). With the rebuilt loops held to
+   a bound on their area change instead of a band about the data loop (`rebuild_loop`): mustard 21/21,
+   12/12, 14/14, 17/17, meat can 37/41, 45/51, 27/40, 38/50 (worst 1.45-3.52 mm). Without the extension: mustard 21/21, 10/12 (worst 1.64 mm),
    14/14, 17/17; meat can 32/41, 31/52, 31/40, 36/50 (worst 1.81-3.47 mm); the figures move with the
    machine too (floating-point differences steer the discrete choices: 37 of 42 for the meat can, seed 1,
    on another). Before the wraps were closed (two halves apart, parameterised each over its own angle):

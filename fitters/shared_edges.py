@@ -36,9 +36,13 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    from the data as before, is re-fitted from join to join (`rgm.fitters.trimloops.fit_open_chain`: split
    at corners, ends fixed on the joins) after dropping the data samples the shared edge covers. Two shared
    edges are never adjacent (a data piece lies between; the back ends need one). A loop that is not simple,
-   not counter-clockwise, leaves the domain or changes the trimmed area by more than 20 % drops the one
-   shared edge without which that face's loop is valid, or else all of that face's shared edges (and the
-   neighbours' loops are rebuilt).
+   not counter-clockwise, leaves the domain or runs farther from the data loop than twice `reach` (a few
+   point spacings) either way, on the surface (the wrong arc of an intersection, a stretch of the data cut
+   off), drops the one shared edge without which that face's loop is valid, or else all of that face's
+   shared edges (and the neighbours' loops are rebuilt). A bound on the change of the trimmed area refused
+   thin faces (a rim's sliver, a strip between two creases) whose sides rightly move out by a few spacings
+   onto their creases: with it, the YCB potted meat can had 147 of 182 seams within 1 mm over four view
+   sets (worst 3.52 mm), with the band 154 of 183 (worst 2.33 mm).
 4. Measurement (`measure_shared`): as the back ends see it, the model objects are built (the surfaces,
    one `IntersectionCurve` of both at the model tolerance, the loops) and each face's piece is the
    stretch of the approximated branch between its neighbouring pieces' ends
@@ -69,7 +73,6 @@ _BRANCH = 4001        # samples of a branch for matching runs and joins
 _TANGENT_DEG = 8.0    # surfaces meeting at less than this along a seam are not intersected
 _FINER = 10           # a shared stretch is confirmed on the intersection approximated at tol / _FINER
 _EDGE_UV = 1e-6       # a branch this close (parameter units) to a domain edge is clamped to it, not crossing
-_MIN_AREA_RATIO = 0.8
 
 
 @dataclass(frozen=True)
@@ -299,7 +302,9 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
 
 def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float):
     """Face k's outer pieces with its runs (one per candidate, none overlapping) replaced by SharedEdge
-    pieces, the rest re-fitted from join to join; or the reason (str) why it cannot be."""
+    pieces, the rest re-fitted from join to join (within `tol_uv`, parameter units); or the reason (str) why
+    it cannot be. `reach` (model units): a data sample within it of a shared edge is covered by it; the
+    new loop must keep within twice that of the data loop, both ways."""
     from rgm.fitters.trimloops import fit_open_chain, signed_area
 
     m = len(loop.uv)
@@ -349,10 +354,14 @@ def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float
     polygon = np.vstack(poly)
     if polygon.min() < 0 or polygon.max() > 1:
         return "its new loop leaves the surface's domain"
-    old = signed_area(loop.uv)
-    new = signed_area(polygon)
-    if not (new > 0 and _MIN_AREA_RATIO <= new / old <= 1 / _MIN_AREA_RATIO):
-        return f"its new loop would change the trimmed area by a factor {new / old:.2f}"
+    if signed_area(polygon) <= 0:
+        return "its new loop would run clockwise"
+    # the new loop keeps to the band about its data loop, both ways (no arc of the intersection far from
+    # the data, no stretch of the data loop cut off)
+    xyz = shape.nurbs().evaluate(polygon[:, 0], polygon[:, 1])
+    apart = max(cKDTree(loop.xyz).query(xyz)[0].max(), cKDTree(xyz).query(loop.xyz)[0].max())
+    if apart > 2 * reach:
+        return f"its new loop would run {apart:.2f} mm from its data loop (over {2 * reach:.2f} mm)"
     if not _simple(polygon):
         return "its new loop would cross itself"
     return pieces

@@ -128,3 +128,66 @@ def test_occ_moves_neighbours_meeting_an_intersection_within_the_tolerance_onto_
     # the wire closes (was "curve pieces do not join end to start")
     model = hand(cut="27.002")
     assert occ.is_valid(occ.to_shape(model.objects["hand"], model.tolerance))
+
+
+def plane_face(width, height, rng):
+    """A flat patch of noisy points on z = 0 over [0, width] x [0, height] (mm), fitted and trimmed as
+    `rgm.fitters.patches` fits a patch (reaching 5 spacings past its data): (shape, loop samples, reach)."""
+    from scipy.spatial import cKDTree
+
+    from rgm.fitters.freeform_part import fit_freeform
+    from rgm.fitters.patches import reach_past
+    from rgm.fitters.shared_edges import _Loop, _loop_samples
+
+    n = int(width * height / 0.25)
+    p = np.c_[rng.uniform(0, width, n), rng.uniform(0, height, n), rng.normal(0, 0.02, n)]
+    spacing = float(np.median(cKDTree(p).query(p, 2)[0][:, 1]))
+    u, v = p[:, 0] / width, p[:, 1] / height
+    shape = fit_freeform(p, 0.1, cuts=False, params=reach_past(p, u, v, 5 * spacing))
+    uv = _loop_samples(shape, spacing)
+    xyz = shape.nurbs().evaluate(uv[:, 0], uv[:, 1])
+    return shape, _Loop(uv, xyz, np.full(len(uv), -1)), 5 * spacing + 0.1
+
+
+def top_edge(shape, loop, course):
+    """A shared-edge candidate for the loop's run along the top side (y > 2/3 of its height, the 2 mm at
+    either end left as data), the edge following `course` (k, 3) points."""
+    from rgm.fitters.shared_edges import _Candidate, _longest_run
+    from rgm.geometry.inversion import closest_point_surface
+
+    y, x = loop.xyz[:, 1], loop.xyz[:, 0]
+    run = _longest_run((y > 2 / 3 * y.max()) & (x > x.min() + 2) & (x < x.max() - 2), close=0)
+    u, v, on, _ = closest_point_surface(shape.nurbs(), course)
+    rising = bool(x[run.idx[-1]] > x[run.idx[0]])    # does the run go the way the course does (+x)?
+    return _Candidate(0, 1, np.asarray(on), {0: np.c_[u, v], 1: np.c_[u, v]}, 0, len(course) - 1, {0: run},
+                      {0: rising}, None)
+
+
+def test_a_thin_face_takes_a_shared_edge_that_moves_its_side_but_not_one_that_runs_off_its_data():
+    from rgm.fitters.freeform_part import _surface_speed
+    from rgm.fitters.shared_edges import SharedEdge, rebuild_loop
+    from rgm.fitters.trimloops import signed_area
+
+    rng = np.random.default_rng(5)
+    # a strip 3 mm wide whose crease lies 4 point spacings past its data (the surface reaches 5 past): the
+    # edge moves its top side out by a third of its width, and its trimmed area grows by more than a
+    # quarter (an area test refused it)
+    shape, loop, reach = plane_face(50.0, 3.0, rng)
+    x = np.linspace(loop.xyz[:, 0].min() + 2, loop.xyz[:, 0].max() - 2, 200)
+    crease = 3.0 + 0.8 * (reach - 0.1)
+    course = np.c_[x, np.full_like(x, crease), np.zeros_like(x)]
+    edge = top_edge(shape, loop, course)
+    tol_uv = 0.1 / _surface_speed(shape.fit)
+    pieces = rebuild_loop(0, shape, loop, [edge], tol_uv, reach)
+    assert not isinstance(pieces, str), pieces
+    assert sum(isinstance(q, SharedEdge) for q in pieces) == 1
+    y = loop.xyz[:, 1]
+    assert (crease - y.min()) / (y.max() - y.min()) > 1.25     # the area's growth
+    assert signed_area(loop.uv) > 0
+    # a square face whose edge dips 15 mm into its data (the wrong arc of an intersection): refused
+    shape, loop, reach = plane_face(30.0, 30.0, rng)
+    x = np.linspace(loop.xyz[:, 0].min() + 2, loop.xyz[:, 0].max() - 2, 200)
+    dip = 29.0 - 15.0 * np.sin(np.pi * (x - x[0]) / (x[-1] - x[0]))
+    edge = top_edge(shape, loop, np.c_[x, dip, np.zeros_like(x)])
+    why = rebuild_loop(0, shape, loop, [edge], 0.1 / _surface_speed(shape.fit), reach)
+    assert isinstance(why, str) and "from its data loop" in why
