@@ -20,7 +20,7 @@ from rgm.fitters.freeform import SurfaceFit, design_matrix, grid_parameters, pla
 from rgm.fitters.freeform_surface import fit_surface
 from rgm.fitters.trimloops import TrimLoops, fit_trim_loops
 
-__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set"]
+__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set", "printed_surface"]
 
 _DEC = 4   # decimals of model-space numbers (mm): 0.1 micrometre
 _UV_DEC = 9
@@ -43,6 +43,9 @@ class FreeformShape:
     loops: TrimLoops | None
     outer: list            # pieces: CurveFit or PlanarCut
     holes: list            # lists of CurveFit
+    # the outer loop as written, a (u, v) polygon (k, 2), where it is not the data loop `loops.outer`
+    # (shared edges in it: `rgm.fitters.shared_edges`); None: it is
+    outline: np.ndarray | None = None
 
     def nurbs(self):
         return self.fit.nurbs()
@@ -359,6 +362,12 @@ def _cut(piece: PlanarCut, surf: str, surface, tolerance: float, ends):
     (ot, o), (nt, n) = _printed(pinned.origin, _PLANE_DEC), _printed(pinned.normal, _PLANE_DEC)
     text = f"intersect({surf}, plane(pt({', '.join(ot)}), vec({', '.join(nt)})))"
     return text, IntersectionCurve(surface, Plane(o, n), tolerance)
+
+
+def printed_surface(shape: FreeformShape):
+    """The model surface (BSplineSurface) a patch's surface reads back as from the `.rgm`: its numbers
+    as written."""
+    return _surface_binding(shape, "")[1]
 
 
 def _surface_binding(shape: FreeformShape, suffix: str):

@@ -178,9 +178,15 @@ def test_a_thin_face_takes_a_shared_edge_that_moves_its_side_but_not_one_that_ru
     course = np.c_[x, np.full_like(x, crease), np.zeros_like(x)]
     edge = top_edge(shape, loop, course)
     tol_uv = 0.1 / _surface_speed(shape.fit)
-    pieces = rebuild_loop(0, shape, loop, [edge], tol_uv, reach)
-    assert not isinstance(pieces, str), pieces
+    out = rebuild_loop(0, shape, loop, [edge], tol_uv, reach)
+    assert not isinstance(out, str), out
+    pieces, outline = out
     assert sum(isinstance(q, SharedEdge) for q in pieces) == 1
+    # the loop as written runs along the crease: its top side at the crease, its other sides as before
+    xyz = shape.nurbs().evaluate(outline[:, 0], outline[:, 1])
+    top = xyz[xyz[:, 1] > 2.0]
+    assert np.abs(top[(top[:, 0] > x[0] + 1) & (top[:, 0] < x[-1] - 1), 1] - crease).max() < 0.05
+    assert abs(xyz[:, 1].min() - loop.xyz[:, 1].min()) < 0.05
     y = loop.xyz[:, 1]
     assert (crease - y.min()) / (y.max() - y.min()) > 1.25     # the area's growth
     assert signed_area(loop.uv) > 0
