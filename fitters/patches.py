@@ -843,7 +843,7 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int | None =
     label = np.full(len(points), -1)
     for r, p in enumerate(patches):
         label[p.indices] = r
-    seams: dict[tuple[int, int], list[np.ndarray]] = {}
+    against: dict[int, list[tuple[int, np.ndarray]]] = {}   # patch -> (neighbour, its seam samples)
     for i, p in enumerate(patches):
         others = np.nonzero((label >= 0) & (label != i))[0]
         if len(others) == 0:
@@ -856,8 +856,13 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int | None =
             seam = samples[hit][owner == o]
             if per_seam is not None:
                 seam = seam[np.linspace(0, len(seam) - 1, min(per_seam, len(seam))).astype(int)]
-            dist = patches[o].shape.distance(seam)
-            seams.setdefault((min(i, o), max(i, o)), []).append(dist)
+            against.setdefault(int(o), []).append((i, seam))
+    seams: dict[tuple[int, int], list[np.ndarray]] = {}
+    for o, parts in against.items():   # one closest-point search per surface, for all its neighbours' samples
+        dist = np.split(patches[o].shape.distance(np.vstack([s for _, s in parts])),
+                        np.cumsum([len(s) for _, s in parts])[:-1])
+        for (i, _), d in zip(parts, dist):
+            seams.setdefault((min(i, o), max(i, o)), []).append(d)
     return [Gap(int(i), int(j), float(np.max(np.concatenate(d))), float(np.percentile(np.concatenate(d), 95)),
                 sum(map(len, d)), why=_CLOSED if _twins(patches, i, j) else "")
             for (i, j), d in sorted(seams.items())]
