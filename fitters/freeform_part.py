@@ -44,8 +44,10 @@ class FreeformShape:
     outer: list            # pieces: CurveFit or PlanarCut
     holes: list            # lists of CurveFit
     # the outer loop as written, a (u, v) polygon (k, 2), where it is not the data loop `loops.outer`
-    # (shared edges in it: `rgm.fitters.shared_edges`); None: it is
+    # (shared edges in it: `rgm.fitters.shared_edges`), and for each vertex the patch its piece is shared
+    # with (-1: a data piece); None: it is the data loop
     outline: np.ndarray | None = None
+    outline_shared: np.ndarray | None = None
 
     def nurbs(self):
         return self.fit.nurbs()

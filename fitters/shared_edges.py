@@ -304,10 +304,11 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
 
 
 def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float):
-    """(pieces, outline): face k's outer pieces with its runs (one per candidate, none overlapping)
-    replaced by SharedEdge pieces, the rest re-fitted from join to join (within `tol_uv`, parameter units),
-    and the new loop as a dense (u, v) polygon (every piece whole, its shared stretches as approximated at
-    the tolerance); or the reason (str) why it cannot be. `reach` (model units): a data sample within it of a shared edge is covered by it; the
+    """(pieces, outline, along): face k's outer pieces with its runs (one per candidate, none
+    overlapping) replaced by SharedEdge pieces, the rest re-fitted from join to join (within `tol_uv`,
+    parameter units), the new loop as a dense (u, v) polygon (every piece whole, its shared stretches as
+    approximated at the tolerance), and for each of its vertices the face its piece is shared with (-1: a
+    data piece); or the reason (str) why it cannot be. `reach` (model units): a data sample within it of a shared edge is covered by it; the
     new loop must keep within twice that of the data loop, both ways."""
     from rgm.fitters.trimloops import fit_open_chain, signed_area
 
@@ -318,7 +319,7 @@ def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float
         if used[c.runs[k].idx].any():
             return "two seams overlap on its loop"
         used[c.runs[k].idx] = True
-    pieces, poly, outline = [], [], []
+    pieces, poly, outline, along = [], [], [], []
     for n, c in enumerate(order):
         other = c.j if c.i == k else c.i
         run, nxt = c.runs[k], order[(n + 1) % len(order)]
@@ -328,6 +329,7 @@ def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float
         pieces.append(SharedEdge(other, (c.i, c.j), c.curve))
         poly.append(arc[np.unique(np.linspace(0, len(arc) - 1, min(len(arc), 120)).astype(int))][:-1])
         outline.append(arc)
+        along.append(np.full(len(arc), other))
         # the data from this run's end to the next run's start, without the samples a shared edge covers
         start = run.end + 1
         stop = nxt.runs[k].start if len(order) > 1 else run.start
@@ -357,6 +359,7 @@ def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float
         pieces += list(rest_pieces)
         poly += [_piece_points(p, max(16, 6 * len(p.ctrl)))[1:-1] for p in rest_pieces]
         outline += [_piece_points(p, 64 * len(p.ctrl)) for p in rest_pieces]
+        along += [np.full(64 * len(p.ctrl), -1) for p in rest_pieces]
     polygon = np.vstack(poly)
     if polygon.min() < 0 or polygon.max() > 1:
         return "its new loop leaves the surface's domain"
@@ -371,7 +374,8 @@ def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float
     if not _simple(polygon):
         return "its new loop would cross itself"
     outline = np.vstack(outline)
-    return pieces, outline[np.r_[True, np.any(np.diff(outline, axis=0) != 0, axis=1)]]
+    keep = np.r_[True, np.any(np.diff(outline, axis=0) != 0, axis=1)]
+    return pieces, outline[keep], np.concatenate(along)[keep]
 
 
 def _simple(poly: np.ndarray) -> bool:
@@ -497,8 +501,8 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
                     rebuild_loop(k, shapes[k], loops[k], [d for d in mine if d is not c], tol_uv, reach), str)), None)
                 failed[k] = (out, [(culprit.i, culprit.j)] if culprit else [(c.i, c.j) for c in suspects])
             else:
-                pieces, outline = out
-                new[k] = FreeformShape(shapes[k].fit, shapes[k].loops, pieces, shapes[k].holes, outline)
+                pieces, outline, along = out
+                new[k] = FreeformShape(shapes[k].fit, shapes[k].loops, pieces, shapes[k].holes, outline, along)
         for k, (reason, pairs) in failed.items():
             for pair in pairs:
                 if pair in cands:

@@ -180,7 +180,8 @@ def test_a_thin_face_takes_a_shared_edge_that_moves_its_side_but_not_one_that_ru
     tol_uv = 0.1 / _surface_speed(shape.fit)
     out = rebuild_loop(0, shape, loop, [edge], tol_uv, reach)
     assert not isinstance(out, str), out
-    pieces, outline = out
+    pieces, outline, along = out
+    assert set(along) == {-1, 1}      # data pieces, and the edge shared with patch 1
     assert sum(isinstance(q, SharedEdge) for q in pieces) == 1
     # the loop as written runs along the crease: its top side at the crease, its other sides as before
     xyz = shape.nurbs().evaluate(outline[:, 0], outline[:, 1])
