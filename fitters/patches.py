@@ -628,9 +628,8 @@ def _unclosed(patches: list[PatchFit], gaps: list[Gap], tol: float) -> dict:
     the back ends and `rgmc compile`'s closure check take it), must reach both within `tol`. Where two
     surfaces nearly touch, marching at the tolerance is sensitive to the last printed digit (the YCB meat
     can: an open branch in memory, a closed loop from the file, and a loop left open by 29.6 mm)."""
-    from rgm.fitters.freeform_measure import branch_between
     from rgm.fitters.freeform_part import printed_surface
-    from rgm.fitters.shared_edges import SharedEdge
+    from rgm.fitters.shared_edges import face_stretch
     from rgm.model import IntersectionCurve
 
     surfaces, out = {}, {}
@@ -642,10 +641,7 @@ def _unclosed(patches: list[PatchFit], gaps: list[Gap], tol: float) -> dict:
                 surfaces[k] = printed_surface(patches[k].shape)
         crease = IntersectionCurve(surfaces[g.i], surfaces[g.j], tol)
         for k, other in ((g.i, g.j), (g.j, g.i)):
-            pieces = patches[k].shape.outer
-            n = next(n for n, p in enumerate(pieces) if isinstance(p, SharedEdge) and p.other == other)
-            ends = np.array([pieces[n - 1].ctrl[-1], pieces[(n + 1) % len(pieces)].ctrl[0]])
-            uv = branch_between(crease.uv_curves(surfaces[k]), *ends)
+            uv, ends = face_stretch(patches[k].shape, surfaces[k], crease, other)
             s = surfaces[k].nurbs()
             miss = float(np.max(np.linalg.norm(s.evaluate(uv[[0, -1], 0], uv[[0, -1], 1])
                                                - s.evaluate(ends[:, 0], ends[:, 1]), axis=1)))

@@ -70,7 +70,7 @@ from scipy.spatial import cKDTree
 from rgm.errors import GeometryError
 from rgm.fitters.trimloops import crosses_itself
 
-__all__ = ["SharedEdge", "share_boundaries", "rebuild_loop", "measure_shared"]
+__all__ = ["SharedEdge", "share_boundaries", "rebuild_loop", "measure_shared", "face_stretch"]
 
 _BRANCH = 4001        # samples of a branch for matching runs and joins
 _TANGENT_DEG = 8.0    # surfaces meeting at less than this along a seam are not intersected
@@ -408,7 +408,6 @@ def measure_shared(i, j, shape_i, shape_j, tol: float, branches=None) -> tuple[f
     loop) and each face's stretch of the approximated branch between its neighbouring pieces' ends.
     `branches`: that approximation if already made (`intersect_surfaces(surface_i, surface_j, tol)`, what
     the IntersectionCurve computes), not computed again."""
-    from rgm.fitters.freeform_measure import branch_between
     from rgm.model import BSplineSurface, IntersectionCurve
 
     sa, sb = BSplineSurface(shape_i.nurbs()), BSplineSurface(shape_j.nurbs())
@@ -417,12 +416,21 @@ def measure_shared(i, j, shape_i, shape_j, tol: float, branches=None) -> tuple[f
         curve._cache[float(tol)] = branches
     edges = []
     for shape, surface, other in ((shape_i, sa, j), (shape_j, sb, i)):
-        pieces = shape.outer
-        k = next(n for n, p in enumerate(pieces) if isinstance(p, SharedEdge) and p.other == other)
-        before, after = pieces[k - 1], pieces[(k + 1) % len(pieces)]
-        uv = branch_between(curve.uv_curves(surface), before.ctrl[-1], after.ctrl[0])
+        uv, _ = face_stretch(shape, surface, curve, other)
         edges.append(surface.nurbs().evaluate(uv[:, 0], uv[:, 1]))
     return edge_gap(*edges)
+
+
+def face_stretch(shape, surface, curve, other: int) -> tuple[np.ndarray, np.ndarray]:
+    """(uv (k, 2), ends (2, 2)): a face's stretch of its shared intersection `curve` (a model
+    IntersectionCurve) with patch `other`, on its model `surface`, as the back ends take it: the branch
+    between the ends of the loop pieces before and after the SharedEdge piece (`ends`, uv)."""
+    from rgm.fitters.freeform_measure import branch_between
+
+    pieces = shape.outer
+    k = next(n for n, p in enumerate(pieces) if isinstance(p, SharedEdge) and p.other == other)
+    ends = np.array([pieces[k - 1].ctrl[-1], pieces[(k + 1) % len(pieces)].ctrl[0]])
+    return branch_between(curve.uv_curves(surface), *ends), ends
 
 
 def edge_gap(ea, eb) -> tuple[float, float, int, float]:
