@@ -125,7 +125,7 @@ class _FaceMesher:
         self.face, self.edges, self.piece_ids = face, edges, piece_ids
         self.tol, self.angle_tol = tol, angle_tol
         self.requests = set()
-        self.qhull = Incremental()
+        self.last = Incremental()
         self.frame = plane_frame(face.patch, tol)
         self.interior = np.zeros((0, 2))
         # a curved face's grid is set by `tessellate_faces` (`_grids`, for all faces at once); on a planar
@@ -179,7 +179,7 @@ class _FaceMesher:
         self.seg_rep = np.concatenate(reps)                    # and the index of its rep segment
         self.versions = self.edges.version.copy()
         self.certified = np.zeros(0, np.int64)                 # keys of triangles measured within tol
-        self.qhull.reset()                                     # the boundary points changed
+        self.last.reset()                                     # the boundary points changed
 
     def _refs(self, segments) -> set:
         """Split requests {(group, rep index)} for boundary segments (indices; poles left out)."""
@@ -259,11 +259,11 @@ class _FaceMesher:
             uv = np.concatenate([self.b_uv, self.interior])
             p = self.scaled(uv)
             try:
-                tri = constrained_delaunay(p, self.segments, self.loops, n_fixed=nb, state=self.qhull)
+                tri = constrained_delaunay(p, self.segments, self.loops, n_fixed=nb, state=self.last)
             except OnSegment as exc:   # free points on a boundary segment: leave them out
                 self.interior = np.delete(self.interior, exc.ids - nb, axis=0)
                 self.certified = np.zeros(0, np.int64)
-                self.qhull.reset()
+                self.last.reset()
                 continue
             xyz = np.concatenate([self.edges.coords()[self.b_ids],
                                   patch.evaluate(self.interior[:, 0], self.interior[:, 1])])

@@ -14,6 +14,12 @@
 3. Triangles are grouped into regions that no segment separates (connected components across
    unconstrained edges); a region is kept when one interior point of it is inside the loops.
 
+A call that only adds free points to the previous call's (the mesher's refinement passes, with an
+`Incremental` state) inserts them locally instead: the triangles whose circumcircles hold a new point
+form a cavity that alone is triangulated again, as above (Bowyer-Watson for many points at once). On a
+bicubic patch meshed to 0.003 mm (18,500 triangles, 7 passes) that took the triangulations from 0.53 s
+to 0.18 s, most passes adding a handful of points to some 9,000.
+
 Only the few missing segments cost Python-level work; everything else is vectorised.
 """
 from __future__ import annotations
@@ -175,8 +181,9 @@ def inside_loops(pts, polygons) -> np.ndarray:
     return out
 
 
-def _regions_inside(p, tri, constrained, n_real, polygons):
-    """Mask of the triangles in regions (not separated by a segment) that lie inside the loops."""
+def _regions(p, tri, constrained, n_real):
+    """(label (t,), ghost (regions,)): the triangles' regions (connected across edges that are not
+    segments) and which regions touch a ghost corner (the points from n_real on)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -190,54 +197,130 @@ def _regions_inside(p, tri, constrained, n_real, polygons):
     ncomp, label = connected_components(graph, directed=False)
     ghost = np.zeros(ncomp, bool)
     ghost[label[(tri >= n_real).any(axis=1)]] = True
+    return label, ghost
+
+
+def _regions_inside(p, tri, constrained, n_real, polygons):
+    """Mask of the triangles in regions (not separated by a segment) that lie inside the loops."""
+    label, ghost = _regions(p, tri, constrained, n_real)
     first = np.unique(label, return_index=True)[1]
-    centroid = p[tri[first]].mean(axis=1)
-    keep = ~ghost & inside_loops(centroid, polygons)
+    keep = ~ghost
+    keep[keep] = inside_loops(p[tri[first[keep]]].mean(axis=1), polygons)
     return keep[label]
 
 
 class Incremental:
-    """Qhull's triangulation kept between calls of `constrained_delaunay` on a growing point set: a call
-    whose points extend the previous call's (same prefix, inside the same bounding box) adds only the
-    new points to it (Qhull's incremental mode) instead of triangulating from scratch. `reset()` when
-    the points change otherwise."""
+    """The last triangulation `constrained_delaunay` returned, kept for the next call on the same points
+    plus more free points (the mesher's refinement passes): those are inserted into it locally
+    (`_insert_local`) instead of triangulating everything again. `reset()` when the points change
+    otherwise (the boundary moved, free points were dropped)."""
 
     def __init__(self):
         self.reset()
 
     def reset(self):
-        self.dt, self.n, self.box = None, 0, None
+        self.points, self.tri, self.n_fixed = None, None, None
+
+    def extends(self, p, n_fixed) -> bool:
+        """True when p is the kept points plus more (same boundary, same free points first)."""
+        return self.points is not None and n_fixed == self.n_fixed and len(p) > len(self.points) and \
+            np.array_equal(p[:len(self.points)], self.points)
+
+    def keep(self, p, tri, n_fixed):
+        self.points, self.tri, self.n_fixed = p, tri, n_fixed
 
 
-def _qhull(p, n_fixed, state):
-    """(points with the four ghost corners first (n + 4, 2), Qhull's simplices in those indices)."""
+def _triangulate(p, seg, n_fixed):
+    """Constrained Delaunay triangulation of points p (n, 2) with segments seg (s, 2) as edges, over the
+    convex hull plus four far ghost corners (indices n..n+3): (points with the ghosts (n + 4, 2),
+    counter-clockwise triangles, sorted keys of the constrained edges)."""
     from scipy.spatial import Delaunay
 
     n = len(p)
     lo, hi = p.min(axis=0), p.max(axis=0)
-    if state is not None and state.dt is not None and state.n <= n and \
-            (lo >= state.box[0]).all() and (hi <= state.box[1]).all():
-        if n > state.n:
-            state.dt.add_points(p[state.n:])
-        dt, ghosts = state.dt, state.ghosts
-    else:
-        scale = float(np.max(hi - lo)) or 1.0
-        pad = 4 * scale
-        ghosts = np.array([[lo[0] - pad, lo[1] - pad], [hi[0] + pad, lo[1] - pad],
-                           [hi[0] + pad, hi[1] + pad], [lo[0] - pad, hi[1] + pad]])
-        dt = Delaunay(np.concatenate([ghosts, p]), incremental=state is not None)
-        if state is not None:
-            state.dt, state.box, state.ghosts = dt, (lo, hi), ghosts
-    if state is not None:
-        state.n = n
-    if len(dt.coplanar):
+    scale = float(np.max(hi - lo)) or 1.0
+    ghosts = np.array([[lo[0], lo[1]], [hi[0], lo[1]], [hi[0], hi[1]], [lo[0], hi[1]]]) + \
+        4 * scale * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+    dt = Delaunay(np.concatenate([ghosts, p]))
+    if len(dt.coplanar):   # Qhull dropped coincident points
         dropped = np.unique(dt.coplanar[:, 0]) - 4
-        if state is not None:
-            state.reset()
         if (dropped >= n_fixed).all():
             raise OnSegment(dropped)
         raise BackendError("coincident boundary points in a face's parameter domain")
-    return ghosts, dt.simplices
+    simplices = dt.simplices
+    allp = np.concatenate([p, ghosts])
+    simplices = simplices.astype(np.int64) - 4          # Qhull's order: ghosts first; here: ghosts last
+    simplices[simplices < 0] += n + 4
+    tri = _remove_flat(allp, _ccw(allp, simplices), scale)
+    m = len(allp)
+    constrained = np.unique(_pair_keys(seg, m))
+    # a recovery removes only unconstrained edges, so segments recovered earlier stay
+    for a, b in seg[~_member(_pair_keys(seg, m), np.sort(_edge_keys(tri, m).ravel()))]:
+        if not _member(np.array([min(a, b) * m + max(a, b)]), np.sort(_edge_keys(tri, m).ravel()))[0]:
+            tri = _insert_segment(allp, tri, int(a), int(b), constrained, n_fixed)
+    if not _member(constrained, np.sort(_edge_keys(tri, m).ravel())).all():
+        raise BackendError("a boundary segment could not be kept in a face's triangulation")
+    return allp, tri, constrained
+
+
+def _circumcircles(p, tri):
+    """Centres (t, 2) and radii (t,) of the triangles' circumcircles (inf for a degenerate triangle)."""
+    a, b, c = p[tri[:, 0]], p[tri[:, 1]], p[tri[:, 2]]
+    b, c = b - a, c - a
+    d = 2 * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0])
+    bb, cc = (b * b).sum(axis=1), (c * c).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = (c[:, 1] * bb - b[:, 1] * cc) / d
+        y = (b[:, 0] * cc - c[:, 0] * bb) / d
+    r = np.hypot(x, y)
+    r[~np.isfinite(r)] = np.inf
+    return a + np.column_stack([x, y]), r
+
+
+def _insert_local(p, tri, n_old, seg):
+    """Insert the points p[n_old:] into tri (a constrained Delaunay triangulation of p[:n_old] whose
+    constrained edges are seg), or None when that cannot be done locally.
+
+    Bowyer-Watson for many points at once: a triangle survives unchanged when its circumcircle holds
+    none of the new points (it stays Delaunay); the others, grown by round-off margins (a larger cavity
+    is only more work), form the cavity, which is triangulated again (`_triangulate`) from its vertices
+    and the new points with its border and the constrained edges inside it as segments; of that, the
+    regions inside the cavity are kept. The result is checked (every new point used, the cavity's area
+    kept) and None is returned when it fails, so the caller triangulates from scratch."""
+    from scipy.spatial import cKDTree
+
+    if not len(tri):
+        return None
+    new = p[n_old:]
+    centre, r = _circumcircles(p, tri)
+    scale = float(np.max(p.max(axis=0) - p.min(axis=0))) or 1.0
+    reach = np.where(np.isfinite(r), r * (1 + 1e-7) + 1e-12 * scale, 4 * scale)
+    cavity = cKDTree(new).query_ball_point(centre, reach, return_length=True) > 0
+    ct = tri[cavity]
+    verts = np.concatenate([np.unique(ct), np.arange(n_old, len(p))])
+    local = np.full(len(p), -1)
+    local[verts] = np.arange(len(verts))
+    n = len(p)
+    e = np.sort(np.stack([ct, np.roll(ct, -1, axis=1)], axis=-1).reshape(-1, 2), axis=1)
+    keys, counts = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
+    keep = (counts == 1) | _member(keys, np.unique(_pair_keys(seg, n)))
+    border = np.column_stack([keys[keep] // n, keys[keep] % n])
+    try:
+        q, sub, constrained = _triangulate(p[verts], local[border], len(verts) - len(new))
+    except BackendError:    # OnSegment included: the full triangulation reports it in the caller's ids
+        return None
+    # a region of the cavity lies left of its directed edges (all triangles counter-clockwise)
+    label, ghost = _regions(q, sub, constrained, len(verts))
+    ids = np.concatenate([verts, n + np.arange(4)])         # the ghost corners' past every point of p
+    directed = (ids[sub] * (n + 4) + ids[np.roll(sub, -1, axis=1)]).ravel()
+    inside = np.zeros(len(ghost), bool)
+    inside[np.repeat(label, 3)[_member(directed, np.sort((ct * (n + 4) + np.roll(ct, -1, axis=1)).ravel()))]] = True
+    sub = sub[(inside & ~ghost)[label]]
+    area = lambda pts, t: 0.5 * np.abs(_orient(pts[t[:, 0]], pts[t[:, 1]], pts[t[:, 2]])).sum()
+    if len(np.setdiff1d(np.arange(len(verts) - len(new), len(verts)), sub)) or \
+            not np.isclose(area(q, sub), area(p, ct), rtol=1e-9, atol=0):
+        return None
+    return np.concatenate([tri[~cavity], verts[sub]])
 
 
 def constrained_delaunay(points, segments, loops, n_fixed=None, state: Incremental | None = None) -> np.ndarray:
@@ -248,27 +331,20 @@ def constrained_delaunay(points, segments, loops, n_fixed=None, state: Increment
              points that may be dropped. segments : (s, 2) point indices that must be edges.
     loops : list of (m,) index arrays, each a closed loop of points (first not repeated).
     Raises `OnSegment` (with the free points' indices) when free points lie on a segment, and
-    BackendError when loops cross or touch. `state` (an `Incremental`) keeps Qhull's triangulation for
-    the next call on these points plus more.
+    BackendError when loops cross or touch. `state` (an `Incremental`) keeps the result for the next
+    call on these points plus more, which inserts the new ones locally (`_insert_local`).
     """
     p = np.asarray(points, float)
     n = len(p)
     n_fixed = n if n_fixed is None else n_fixed
-    ghosts, simplices = _qhull(p, n_fixed, state)
-    scale = float(np.max(p.max(axis=0) - p.min(axis=0))) or 1.0
-    allp = np.concatenate([p, ghosts])
-    simplices = simplices.astype(np.int64) - 4          # Qhull's order: ghosts first; here: ghosts last
-    simplices[simplices < 0] += n + 4
-    tri = _remove_flat(allp, _ccw(allp, simplices), scale)
     seg = np.asarray(segments, np.int64)
-    m = len(allp)
-    constrained = np.unique(_pair_keys(seg, m))
-    # a recovery removes only unconstrained edges, so segments recovered earlier stay
-    for a, b in seg[~_member(_pair_keys(seg, m), np.sort(_edge_keys(tri, m).ravel()))]:
-        if not _member(np.array([min(a, b) * m + max(a, b)]), np.sort(_edge_keys(tri, m).ravel()))[0]:
-            tri = _insert_segment(allp, tri, int(a), int(b), constrained, n_fixed)
-    if not _member(constrained, np.sort(_edge_keys(tri, m).ravel())).all():
-        raise BackendError("a boundary segment could not be kept in a face's triangulation")
-    polygons = [p[np.asarray(loop)] for loop in loops]
-    return tri[_regions_inside(allp, tri, constrained, n, polygons)]
-
+    tri = None
+    if state is not None and state.extends(p, n_fixed):
+        tri = _insert_local(p, state.tri, len(state.points), seg)
+    if tri is None:
+        allp, tri, constrained = _triangulate(p, seg, n_fixed)
+        polygons = [p[np.asarray(loop)] for loop in loops]
+        tri = tri[_regions_inside(allp, tri, constrained, n, polygons)]
+    if state is not None:
+        state.keep(p, tri, n_fixed)
+    return tri

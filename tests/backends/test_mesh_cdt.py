@@ -85,29 +85,46 @@ def test_free_point_on_a_segment_is_reported_and_crossing_loops_refused():
                              [np.arange(4), 4 + np.arange(4)])
 
 
+def edge_set(tri):
+    return {tuple(sorted(t)) for t in np.sort(tri, axis=1).tolist()}
+
+
 @settings(max_examples=40, deadline=None)
-@given(st.integers(0, 2**32 - 1))
-def test_incremental_triangulation_of_a_growing_point_set(seed):
-    """The mesher's passes add free points to the same boundary: with an `Incremental` state Qhull adds
-    them to the previous triangulation; every result still covers the region with every segment kept."""
+@given(st.integers(0, 2**32 - 1), st.booleans())
+def test_points_inserted_locally_give_the_fresh_triangulation(seed, grid):
+    """The mesher's passes add free points to the same boundary: with an `Incremental` state they are
+    inserted into the previous triangulation (the cavity of triangles whose circumcircles hold them is
+    triangulated again). Every result covers the region with every segment kept; for points in general
+    position it is the same triangulation as one made from scratch (the constrained Delaunay
+    triangulation is unique), and on a regular grid (cocircular points: ties) it has as many triangles."""
     rng = np.random.default_rng(seed)
     k = int(rng.integers(8, 40))
     ang = 2 * np.pi * (np.arange(k) + rng.uniform(-0.3, 0.3, k)) / k
     outer = np.column_stack([np.cos(ang), np.sin(ang)]) * rng.uniform(0.8, 1.0, (k, 1))
+    h = int(rng.integers(3, 9))
+    hole = 0.15 * np.column_stack([np.cos(-np.linspace(0, 2 * np.pi, h, endpoint=False)),
+                                   np.sin(-np.linspace(0, 2 * np.pi, h, endpoint=False))]) + rng.uniform(-0.1, 0.1, 2)
     g = np.linspace(-1, 1, int(rng.integers(3, 12)))
-    points = np.concatenate([outer, np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2) * 0.5])
-    segments = closed_segments(0, k)
+    free = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2) * 0.5
+    if not grid:
+        free = free + rng.uniform(-0.01, 0.01, free.shape)
+    points = np.concatenate([outer, hole, free])
+    segments = np.concatenate([closed_segments(0, k), closed_segments(k, h)])
+    loops = [np.arange(k), k + np.arange(h)]
     state = Incremental()
-    for _ in range(4):
+    for _ in range(5):
         try:
-            tri = constrained_delaunay(points, segments, [np.arange(k)], n_fixed=k, state=state)
+            tri = constrained_delaunay(points, segments, loops, n_fixed=k + h, state=state)
         except OnSegment as exc:
             points = np.delete(points, exc.ids, axis=0)
             state.reset()
             continue
-        check_cover(points, tri, segments, signed_area(outer))
-        fresh = constrained_delaunay(points, segments, [np.arange(k)], n_fixed=k)
-        assert len(fresh) == len(tri)
-        r = np.sqrt(rng.uniform(0, 0.5, int(rng.integers(1, 30))))
+        check_cover(points, tri, segments, signed_area(outer) + signed_area(hole))
+        fresh = constrained_delaunay(points, segments, loops, n_fixed=k + h)
+        if grid:
+            assert len(fresh) == len(tri)
+        else:
+            assert edge_set(fresh) == edge_set(tri)
+        r = np.sqrt(rng.uniform(0, 0.6, int(rng.integers(1, 60))))
         t = rng.uniform(0, 2 * np.pi, len(r))
         points = np.concatenate([points, np.column_stack([r * np.cos(t), r * np.sin(t)])])
