@@ -57,11 +57,13 @@ def _samples(knots, degree, n, polygon, budget=600):
     total = max(float(cumulative[-1]), 1e-300)
     per_span = np.clip(np.ceil(64 * span_length / total), 2 * degree + 2, 64).astype(int)
     per_span = np.maximum(per_span * min(1.0, budget / per_span.sum()), 1).astype(int)
-    params = [values[:-1, None][i] + np.diff(values)[i] * np.arange(c) / c for i, c in enumerate(per_span)]
+    step = np.arange(per_span.sum()) - np.repeat(np.cumsum(per_span) - per_span, per_span)   # 0..c-1 per span
+    params = np.repeat(values[:-1], per_span) + np.repeat(np.diff(values), per_span) * step / \
+        np.repeat(per_span, per_span)
     kinks = values[1:-1][counts[1:-1] >= degree]
     breaks = np.r_[values[0], kinks, values[-1]]
     below = np.nextafter(kinks, -np.inf)
-    return np.sort(np.concatenate(params + [below, values[-1:]])), breaks
+    return np.sort(np.concatenate([params, below, values[-1:]])), breaks
 
 
 def _piece_bounds(t, breaks):
