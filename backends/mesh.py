@@ -31,8 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from rgm.errors import BackendError
+from rgm.geometry.polygon import inside_polygons
 
-from .mesh_cdt import Incremental, OnSegment, constrained_delaunay, inside_loops
+from .mesh_cdt import Incremental, OnSegment, constrained_delaunay
 from .mesh_edges import CERTIFY, Edges, segment_distance, uv_of
 from .mesh_surface import evaluate_together, project_together
 from .mesh_faces import collect_faces
@@ -192,7 +193,7 @@ class _FaceMesher:
         self._boundary(found)
         if len(self.interior):
             p = self.scaled(self.b_uv)
-            self.interior = self.interior[inside_loops(self.scaled(self.interior), [p[lp] for lp in self.loops])]
+            self.interior = self.interior[inside_polygons(self.scaled(self.interior), [p[lp] for lp in self.loops])]
 
     def scaled(self, uv):
         """Grid-index coordinates: the initial grid's cells become unit squares, so Delaunay works in a
@@ -213,7 +214,7 @@ class _FaceMesher:
         t = np.concatenate([np.arange(m) / m for m in k])
         dense = np.repeat(a, k, axis=0) + t[:, None] * np.repeat(b - a, k, axis=0)
         far = cKDTree(dense).query(q, distance_upper_bound=CLEARANCE)[0] > CLEARANCE
-        keep = far & inside_loops(q, [p[lp] for lp in self.loops])
+        keep = far & inside_polygons(q, [p[lp] for lp in self.loops])
         return cand[keep]
 
     def _flat(self) -> bool:

@@ -27,6 +27,9 @@ from __future__ import annotations
 import numpy as np
 
 from rgm.errors import BackendError
+from rgm.geometry.polygon import inside_polygons
+
+from .mesh_lattice import split_lattice
 
 
 class OnSegment(BackendError):
@@ -165,22 +168,6 @@ def _insert_segment(p, tri, a, b, constrained, n_fixed):
     return _ccw(p, np.concatenate([tri[~cavity], np.array(new, np.int64).reshape(-1, 3)]))
 
 
-def inside_loops(pts, polygons) -> np.ndarray:
-    """Even-odd test of points (k, 2) against closed polygons (list of (m, 2), first point not
-    repeated), in chunks of about 4M point-edge pairs."""
-    out = np.zeros(len(pts), bool)
-    for poly in polygons:
-        a, b = poly, np.roll(poly, -1, axis=0)
-        step = max(1, 4_000_000 // max(len(poly), 1))
-        for s in range(0, len(pts), step):
-            x, y = pts[s:s + step, 0:1], pts[s:s + step, 1:2]
-            cond = (a[:, 1] > y) != (b[:, 1] > y)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                xi = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-            out[s:s + step] ^= (np.count_nonzero(cond & (x < xi), axis=1) % 2).astype(bool)
-    return out
-
-
 def _regions(p, tri, constrained, n_real):
     """(label (t,), ghost (regions,)): the triangles' regions (connected across edges that are not
     segments) and which regions touch a ghost corner (the points from n_real on)."""
@@ -200,12 +187,15 @@ def _regions(p, tri, constrained, n_real):
     return label, ghost
 
 
-def _regions_inside(p, tri, constrained, n_real, polygons):
-    """Mask of the triangles in regions (not separated by a segment) that lie inside the loops."""
+def _regions_inside(p, tri, constrained, n_real, polygons, lattice=None):
+    """Mask of the triangles in regions (not separated by a segment) that lie inside the loops (and,
+    with a `Lattice`, outside its full cells, which are triangled apart)."""
     label, ghost = _regions(p, tri, constrained, n_real)
     first = np.unique(label, return_index=True)[1]
     keep = ~ghost
-    keep[keep] = inside_loops(p[tri[first[keep]]].mean(axis=1), polygons)
+    centroid = p[tri[first[keep]]].mean(axis=1)
+    keep[keep] = inside_polygons(centroid, polygons) & \
+        (True if lattice is None else ~lattice.in_full_cell(centroid))
     return keep[label]
 
 
@@ -323,6 +313,26 @@ def _insert_local(p, tri, n_old, seg):
     return np.concatenate([tri[~cavity], verts[sub]])
 
 
+def _fresh(p, seg, polygons, n_fixed):
+    """The triangles inside the loops, from scratch: the full unit cells of the lattice points
+    (`rgm.backends.mesh_lattice`) as they are, the rest by `_triangulate` of the band between the loops
+    and their outline (kept as segments); or everything by `_triangulate` when there is no lattice."""
+    lattice = split_lattice(p, seg)
+    if lattice is None:
+        allp, tri, constrained = _triangulate(p, seg, n_fixed)
+        return tri[_regions_inside(allp, tri, constrained, len(p), polygons)]
+    lattice.inner[:n_fixed] = False          # the boundary points stay first, where the segments need them
+    band = np.flatnonzero(~lattice.inner)
+    local = np.full(len(p), -1)
+    local[band] = np.arange(len(band))
+    try:
+        allp, tri, constrained = _triangulate(p[band], local[np.concatenate([seg, lattice.outline])], n_fixed)
+    except OnSegment as exc:
+        raise OnSegment(band[exc.ids]) from None
+    tri = tri[_regions_inside(allp, tri, constrained, len(band), polygons, lattice)]
+    return np.concatenate([band[tri], lattice.triangles])
+
+
 def constrained_delaunay(points, segments, loops, n_fixed=None, state: Incremental | None = None) -> np.ndarray:
     """Triangles (t, 3) int64, counter-clockwise, of the region inside `loops` (even-odd), with every
     segment as an edge.
@@ -342,9 +352,7 @@ def constrained_delaunay(points, segments, loops, n_fixed=None, state: Increment
     if state is not None and state.extends(p, n_fixed):
         tri = _insert_local(p, state.tri, len(state.points), seg)
     if tri is None:
-        allp, tri, constrained = _triangulate(p, seg, n_fixed)
-        polygons = [p[np.asarray(loop)] for loop in loops]
-        tri = tri[_regions_inside(allp, tri, constrained, n, polygons)]
+        tri = _fresh(p, seg, [p[np.asarray(loop)] for loop in loops], n_fixed)
     if state is not None:
         state.keep(p, tri, n_fixed)
     return tri

@@ -24,35 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["TrimmedNurbs", "foot_distances", "inside_loops", "branch_between"]
+from rgm.geometry.polygon import inside_polygons
+
+__all__ = ["TrimmedNurbs", "foot_distances", "branch_between"]
 
 _PER_SPAN = 16      # samples per knot span of a 2-D loop piece
 _BRANCH = 4097      # samples of an intersection branch in (u, v)
-
-
-def inside_loops(uv: np.ndarray, loops, bins: int | None = None) -> np.ndarray:
-    """(m,) bool: points uv (m, 2) inside the region bounded by closed polygons `loops` (each (k, 2),
-    last point not repeated) by the even-odd rule (inside the outer loop, outside its holes). Crossings
-    of the ray towards +u are counted per band of v, against only the edges that reach into the band."""
-    a = np.vstack(loops)
-    b = np.vstack([np.roll(p, -1, axis=0) for p in loops])
-    lo, hi = np.minimum(a[:, 1], b[:, 1]), np.maximum(a[:, 1], b[:, 1])
-    dy = b[:, 1] - a[:, 1]
-    slope = np.divide(b[:, 0] - a[:, 0], dy, out=np.zeros_like(dy), where=dy != 0)
-    bins = bins or int(np.clip(np.sqrt(len(a) * max(len(uv), 1)) / 64, 16, 1024))
-    edges = np.linspace(uv[:, 1].min(), uv[:, 1].max(), bins + 1) if len(uv) else np.zeros(2)
-    band = np.clip(np.searchsorted(edges, uv[:, 1], side="right") - 1, 0, bins - 1)
-    order = np.argsort(band, kind="stable")
-    cuts = np.searchsorted(band[order], np.arange(bins + 1))
-    out = np.zeros(len(uv), bool)
-    for k in np.nonzero(np.diff(cuts))[0]:
-        sel = order[cuts[k]:cuts[k + 1]]
-        q = uv[sel]
-        e = np.nonzero((hi >= edges[k]) & (lo <= edges[k + 1]))[0]
-        crosses = (a[e, 1][None, :] > q[:, None, 1]) != (b[e, 1][None, :] > q[:, None, 1])
-        x = a[e, 0][None, :] + (q[:, None, 1] - a[e, 1][None, :]) * slope[e][None, :]
-        out[sel] = (np.count_nonzero(crosses & (q[:, None, 0] < x), axis=1) % 2) == 1
-    return out
 
 
 def _curve_uv(curve) -> np.ndarray:
@@ -133,7 +110,7 @@ class TrimmedNurbs:
         """(m,) bool: parameters uv (m, 2) on the face (inside the trim)."""
         if not self.loops:
             return np.ones(len(uv), bool)
-        return inside_loops(uv, self.loops)
+        return inside_polygons(uv, self.loops)
 
     def bounds(self) -> np.ndarray:
         """(2, 3) box containing the face: its control net's box (the convex hull property)."""

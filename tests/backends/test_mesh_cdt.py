@@ -128,3 +128,51 @@ def test_points_inserted_locally_give_the_fresh_triangulation(seed, grid):
         r = np.sqrt(rng.uniform(0, 0.6, int(rng.integers(1, 60))))
         t = rng.uniform(0, 2 * np.pi, len(r))
         points = np.concatenate([points, np.column_stack([r * np.cos(t), r * np.sin(t)])])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_full_lattice_cells_are_split_apart_and_the_band_around_them_is_triangulated(seed):
+    """A face's points in its scaled plane: loop samples (a star, a hole, a few segments cutting through
+    cells without a sample in them) around integer lattice nodes clear of the loops, plus free points off
+    the lattice. The unit cells with four corners, nothing inside and no segment entering are split along a
+    diagonal (`split_lattice`); the rest is triangulated as a band. The result covers the region with every
+    segment an edge once, and has as many triangles as the triangulation of every point by Qhull (a
+    triangulation's triangle count is fixed by its vertices and region)."""
+    import rgm.backends.mesh_cdt as cdt
+    from rgm.backends.mesh_lattice import split_lattice
+
+    rng = np.random.default_rng(seed)
+    size = float(rng.uniform(18, 40))
+    k = int(rng.integers(8, 60))
+    ang = 2 * np.pi * (np.arange(k) + rng.uniform(-0.3, 0.3, k)) / k
+    outer = np.column_stack([np.cos(ang), np.sin(ang)]) * size * rng.uniform(0.8, 1.0, (k, 1))
+    if rng.random() < 0.5:   # sides along lattice lines: segments on cell sides do not block the cell
+        outer = np.rint(outer)
+    h = int(rng.integers(3, 12))
+    hole = 0.2 * size * np.column_stack([np.cos(-np.linspace(0, 2 * np.pi, h, endpoint=False)),
+                                         np.sin(-np.linspace(0, 2 * np.pi, h, endpoint=False))]) + 0.37
+    g = np.arange(-int(size), int(size) + 1, dtype=float)
+    grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    loops = [outer, hole]
+    a, b = np.vstack(loops), np.vstack([np.roll(lp, -1, axis=0) for lp in loops])
+    ab = b - a
+    t = np.clip(((grid[:, None] - a) * ab).sum(-1) / (ab * ab).sum(-1), 0, 1)
+    clear = np.linalg.norm(grid[:, None] - (a + t[..., None] * ab), axis=-1).min(axis=1) > 0.3
+    inside = cdt.inside_polygons(grid, loops)
+    free = rng.uniform(-0.5 * size, 0.5 * size, (int(rng.integers(0, 40)), 2))
+    points = np.concatenate([outer, hole, grid[clear & inside], free[cdt.inside_polygons(free, loops)]])
+    _, unique = np.unique(points, axis=0, return_index=True)
+    points = points[np.sort(unique)]
+    assume(len(points) == k + h + (clear & inside).sum() + cdt.inside_polygons(free, loops).sum())
+    segments = np.concatenate([closed_segments(0, k), closed_segments(k, h)])
+    loop_ids = [np.arange(k), k + np.arange(h)]
+    assert split_lattice(points, segments) is not None
+    try:
+        tri = constrained_delaunay(points, segments, loop_ids, n_fixed=k + h)
+    except OnSegment:   # a free point on a segment: the mesher drops such points
+        return
+    check_cover(points, tri, segments, signed_area(outer) + signed_area(hole))
+    allp, whole, constrained = cdt._triangulate(points, segments, k + h)
+    whole = whole[cdt._regions_inside(allp, whole, constrained, len(points), [points[lp] for lp in loop_ids])]
+    assert len(whole) == len(tri)
