@@ -273,7 +273,8 @@ def _insert_local(p, tri, n_old, seg):
 
     Bowyer-Watson for many points at once: a triangle survives unchanged when its circumcircle holds
     none of the new points (it stays Delaunay); the others, grown by round-off margins (a larger cavity
-    is only more work), form the cavity, which is triangulated again (`_triangulate`) from its vertices
+    is only more work), form the cavity (so a Delaunay triangulation gets the one made from scratch; any
+    other, such as the lattice cells `_fresh` splits apart, a valid one), which is triangulated again (`_triangulate`) from its vertices
     and the new points with its border and the constrained edges inside it as segments; of that, the
     regions inside the cavity are kept. The result is checked (every new point used, the cavity's area
     kept) and None is returned when it fails, so the caller triangulates from scratch."""
@@ -317,7 +318,7 @@ def _fresh(p, seg, polygons, n_fixed):
     """The triangles inside the loops, from scratch: the full unit cells of the lattice points
     (`rgm.backends.mesh_lattice`) as they are, the rest by `_triangulate` of the band between the loops
     and their outline (kept as segments); or everything by `_triangulate` when there is no lattice."""
-    lattice = split_lattice(p, seg)
+    lattice = split_lattice(p, seg, polygons)
     if lattice is None:
         allp, tri, constrained = _triangulate(p, seg, n_fixed)
         return tri[_regions_inside(allp, tri, constrained, len(p), polygons)]

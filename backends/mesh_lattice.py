@@ -16,6 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from rgm.geometry.polygon import inside_polygons
+
 #: a point within this (cell units) of the integer lattice is a lattice node
 _ON = 1e-9
 #: cells are blocked by points and segments this near (cell units): conservative against round-off
@@ -46,9 +48,12 @@ class Lattice:
         return out
 
 
-def split_lattice(p, seg) -> Lattice | None:
-    """The full cells of points p (n, 2) with segments seg (s, 2) (index pairs), or None when fewer
-    than _WORTH nodes would be left out (or the lattice is too sparse to be worth a grid)."""
+def split_lattice(p, seg, polygons) -> Lattice | None:
+    """The full cells of points p (n, 2) with segments seg (s, 2) (index pairs) inside the region of
+    `polygons` (even-odd), or None when fewer than _WORTH nodes would be left out (or the lattice is too
+    sparse to be worth a grid). A cell no segment enters and no point lies in is wholly inside the region
+    or wholly outside it (a notch or a hole whose corners are loop samples on the lattice): its centre says
+    which."""
     on = (np.abs(p - np.rint(p)) <= _ON).all(axis=1)
     if on.sum() < _WORTH:
         return None
@@ -63,6 +68,8 @@ def split_lattice(p, seg) -> Lattice | None:
     _block_points(full, p[~on] - origin)
     if not _block_segments(full, p[seg[:, 0]] - origin, p[seg[:, 1]] - origin):
         return None
+    ci, cj = np.nonzero(full)
+    full[ci, cj] = inside_polygons(np.column_stack([ci, cj]) + origin + 0.5, polygons)
     # nodes all four of whose cells are full: the band leaves them out
     padded = np.pad(full, 1)
     inner_node = padded[:-1, :-1] & padded[1:, :-1] & padded[:-1, 1:] & padded[1:, 1:]

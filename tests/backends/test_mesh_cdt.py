@@ -167,7 +167,7 @@ def test_full_lattice_cells_are_split_apart_and_the_band_around_them_is_triangul
     assume(len(points) == k + h + (clear & inside).sum() + cdt.inside_polygons(free, loops).sum())
     segments = np.concatenate([closed_segments(0, k), closed_segments(k, h)])
     loop_ids = [np.arange(k), k + np.arange(h)]
-    assert split_lattice(points, segments) is not None
+    assert split_lattice(points, segments, [points[lp] for lp in loop_ids]) is not None
     try:
         tri = constrained_delaunay(points, segments, loop_ids, n_fixed=k + h)
     except OnSegment:   # a free point on a segment: the mesher drops such points
@@ -176,3 +176,23 @@ def test_full_lattice_cells_are_split_apart_and_the_band_around_them_is_triangul
     allp, whole, constrained = cdt._triangulate(points, segments, k + h)
     whole = whole[cdt._regions_inside(allp, whole, constrained, len(points), [points[lp] for lp in loop_ids])]
     assert len(whole) == len(tri)
+
+
+def test_a_lattice_cell_outside_the_loop_with_loop_corners_is_left_out():
+    """A square loop along lattice lines (its samples on lattice nodes) with a notch one cell wide and
+    deep, and a one-cell hole: their four corners are loop samples, nothing lies inside them and the
+    loops only run along their sides, yet they lie outside the region, so they are not triangulated."""
+    side = [(x, 0) for x in range(20)] + [(20, y) for y in range(20)] + \
+        [(x, 20) for x in range(20, 10, -1)] + [(11, 19), (10, 19)] + [(x, 20) for x in range(10, 0, -1)] + \
+        [(0, y) for y in range(20, 0, -1)]
+    outer = np.array(side, float)
+    hole = np.array([(5, 5), (5, 6), (6, 6), (6, 5)], float)   # clockwise
+    g = np.arange(1, 20, dtype=float)
+    grid = np.stack(np.meshgrid(g, g), axis=-1).reshape(-1, 2)
+    taken = {tuple(q) for q in np.vstack([outer, hole]).tolist()}
+    grid = np.array([q for q in grid.tolist() if tuple(q) not in taken])
+    points = np.concatenate([outer, hole, grid])
+    k = len(outer)
+    segments = np.concatenate([closed_segments(0, k), closed_segments(k, 4)])
+    tri = constrained_delaunay(points, segments, [np.arange(k), k + np.arange(4)], n_fixed=k + 4)
+    check_cover(points, tri, segments, 400.0 - 1.0 - 1.0)
