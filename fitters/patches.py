@@ -35,68 +35,31 @@ merged views of a closed or wrapped part:
    (from its data, re-fitted from join to join) at two points on both surfaces. The least-squares surfaces
    reach past their data (2.), so near a crease they usually cross. G0 then holds by construction to
    the intersection's approximation; it is measured, not assumed: along the shared edge as the back ends
-   take it (each face's stretch of the branch approximated at the model tolerance, on its own surface,
-   against the other face's). Where nothing is shared (surfaces meeting nearly tangentially; surfaces
-   that do not reach past the crease; seams of a few samples; a rebuilt
-   loop that would not be valid) the faces keep their own trims and the gap is measured as before:
-   points sampled along one patch's trimming loop near the other patch projected onto the other patch's
-   surface (closest points), of the order of the trim's distance from the data edge (a few point
-   spacings), reported with the reason. The loop sampled is the one written (`as_written`): a face with
-   shared edges has its data loop re-fitted between their joins, so near its corners its edge is not
-   where its data loop ran (measured on the data loops, the meat can's figures read 3-6 seams better
-   per view set than its written files have). The figures reported take every sample about 0.1 mm apart
-   (at the YCB views' spacing), as a check of the written `.rgm` at that density finds them (within
-   0.07 mm on 246 of 247 seams over twelve view sets; at one seam's end, where samples lie at the edge of
-   the band that says which neighbour they border, 0.58 against 1.81 mm). The corners between two shared
-   edges (a short data piece) are not shared.
-   Seams still over the tolerance: a common boundary curve by constrained refit. The patches of those
-   seams are fitted again with anchors (`seam_anchors`, `rgm.fitters.freeform.Anchors`): along every
-   seam of theirs that is not shared, both faces' trimming-loop samples near the other face, their
-   closest points on the other surface, and the midpoints between the two, which each refitted surface
-   is pulled through at its own parameters (the sample's, or its closest point's) by a weighted penalty
-   in the least squares, knots inserted until the anchors are met within a quarter of the tolerance
-   (toward a fixed neighbour: onto its surface). Both surfaces then pass through one curve along the
-   seam (a band where they meet nearly tangentially). The refit is at half the tolerance (each surface
-   nearer the crease data both approximate), at the tolerance where that does not hold; every patch
-   still meets its own certificate. The set is shared and measured again (the seams shared before and
-   those still over the tolerance are intersected again; a seam brought within it keeps separate trims,
-   measured: intersections are most of the cost, and surfaces pulled together meet ill-conditioned); each
-   group of patches linked by loose seams keeps its refit only if its seams do better, then a refitted
-   patch whose own seams do worse is put back (a group spans most of a part), and the set is kept if it
-   brings more seams within the tolerance; while it does, the seams still over the tolerance get another
-   round, from the set kept (`_ROUNDS`, nets capped at 4 times their first size). A patch with a shared
-   edge is also held to that edge: samples of the current intersection (`_shared_stretch`) are anchors at
-   each surface's own parameters of it, so the re-intersected edge stays near where it was and
-   OpenCASCADE's exact intersection still closes the face (unheld, pulled along a band at its other seams,
-   it did not).
-   Last, the seams still over the tolerance whose surfaces do not cross along them (meeting tangentially,
-   stopping short, crossing elsewhere) are shared as one curve midway between the two surfaces where one
-   lies within the tolerance of both (`rgm.fitters.seam_curves`: `seam_i_j := bspline(...)` in both
-   loops), the shared intersections kept as they were; the set is kept if it scores better. A closed
-   wrap's two faces are refitted together, as one surface; when a round brings nothing, it is tried
-   again with the wraps held as fixed neighbours. Every surface is held, where it reaches past its data, to
-   bend no more than over them (`rgm.fitters.freeform.Extension`), so neighbours that must cross do not run
-   off instead. Last, each shared intersection is checked as the file reads back (`_unclosed`: the printed
-   surfaces' intersection must run between its joins; where surfaces nearly touch, marching at the
-   tolerance is sensitive to the last digit written) and unshared where it is not. YCB mustard bottle
-   at 1 mm, the views' noise from seeds 1-4, measured on the loops as written: 21 of 21, 11 of 12 (a
-   short corner seam, 1.18 mm), 14 of 14, 17 of 17 seams within (worst 0.64-0.81 mm otherwise), seeds
-   5-8 27 of 27, 13 of 13, 24 of 24, 18 of 19 (1.87 mm); potted meat can: 36 of 41, 39 of 54, 25 of 40,
-   35 of 50 (worst 2.14-3.98 mm), and every written file passes `rgmc compile`'s closure check and
-   OpenCASCADE. A sample on a shared edge lies on that edge's seam (`g0_gaps`): counted on the seam with
-   whichever third face's points lie nearest, the meat can read 33/41, 39/54, 25/40, 36/50 and the
-   mustard bottle seeds 5-8 26/27, 13/13, 24/24, 18/19. Earlier figures were measured on the data loops
-   (optimistic by 3-6 seams a view set on the meat can, as their written files showed) and are kept as
-   such: with the band about the data loop (`rebuild_loop`) mustard 21/21, 11/12, 14/14, 17/17, meat can
-   37/41, 46/52, 29/40, 42/50 (their written files: 34/41, 40/52, 26/40, 37/50; with the written loops
-   steering the choices, one of seed 4's came out with a loop its own intersection left open by 29.6
-   mm, hence the check); with an
-   area bound instead, mustard 21/21, 12/12, 14/14, 17/17, meat can 37/41, 45/51, 27/40, 38/50; without
-   the extension, mustard 21/21, 10/12 (worst 1.64 mm), 14/14, 17/17, meat can 32/41, 31/52, 31/40,
-   36/50; the figures move with the machine too (floating-point differences steer the discrete choices:
-   37 of 42 for the meat can, seed 1, on another). Before the wraps were closed (two halves apart,
-   parameterised each over its own angle): mustard 21 of 21, 12 of 12, 12 of 15 (the wrap's seam 2.82
-   mm), 18 of 18; meat can 33 of 42, 29 of 53, 33 of 40, 29 of 49.
+   take it. Where nothing is shared (surfaces meeting nearly tangentially; surfaces that do not reach
+   past the crease; seams of a few samples; a rebuilt loop that would not be valid) the faces keep their
+   own trims and the gap is measured (`g0_gaps`): samples of one patch's trimming loop as written
+   (`as_written`: a face with shared edges has its data loop re-fitted between their joins) whose nearest
+   other data belong to the other patch, projected onto the other patch's surface, every sample about
+   0.1 mm apart (as a check of the written `.rgm` finds them), reported with the reason.
+   Seams still over the tolerance get a common boundary curve by constrained refit (`_share_and_refit`):
+   the patches of those seams are fitted again with anchors (`seam_anchors`, `rgm.fitters.freeform.Anchors`)
+   along every seam of theirs not shared (both faces' loop samples near the other face, their closest
+   points on the other surface and the midpoints), at half the tolerance where that holds, each patch
+   still meeting its own certificate; a patch with a shared edge is held to it. The set is shared and
+   measured again, and kept by groups, by patch and as a whole only where it brings more seams within the
+   tolerance, for up to `_ROUNDS` rounds. Last, seams whose surfaces do not cross along them may share
+   one curve midway between the two surfaces (`rgm.fitters.seam_curves`), a closed wrap's two faces are
+   refitted as one surface, and each shared intersection is checked as the file reads back (`_unclosed`:
+   where surfaces nearly touch, marching at the tolerance is sensitive to the last printed digit) and
+   unshared where it does not close. Every surface is held, where it reaches past its data, to bend no
+   more than over them (`rgm.fitters.freeform.Extension`), so neighbours that must cross do not run off.
+   YCB views at 1 mm (the tests' six views, measured on the loops as written), seams within: mustard
+   bottle, noise seeds 1-8, 21/21, 11/12, 14/14, 17/17, 27/27, 13/13, 24/24, 18/19 (worst 0.64-0.81 mm where
+   all hold); potted meat can, seeds 1-4, 36/41, 39/54, 25/40, 35/50 (worst 2.14-3.98 mm). What stays over: short seams at
+   three-patch corners (too short on one side to share), the meat can's rolled-rim slivers whose surfaces
+   do not reach their neighbours, near-tangent or closed intersections. The figures move with the machine
+   (floating-point differences steer the discrete choices). Their history, and what was tried, is in
+   docs/fitting.md and the commit log.
 5. `rgmc fit` writes the patches (`rgm.fitters.freeform_build`, `rgm.fitters.pipeline`), each with its
    certificate measured on the printed trimmed surface.
 """
