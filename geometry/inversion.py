@@ -95,12 +95,14 @@ def _nearest_seeds(sample_points, neighbours, queries, count, candidates=32):
     return np.take_along_axis(index, order, 1)
 
 
-def _local_minimum_seeds(sample_points, neighbours, queries, count):
+def _local_minimum_seeds(sample_points, shape, queries, count):
     """Indices (k, count) of samples that are local minima of the distance to each query (no
     grid neighbour is closer), best first; one start per basin of the sampled distance function.
 
-    neighbours : (s, m) indices of each sample's grid neighbours. Distances are computed in
-    blocks of queries, so memory stays bounded; the cost is k x s.
+    shape : (a, b), the samples being an a x b grid flattened row-major (a curve's: (n, 1)); the
+    neighbours are the four across the grid lines (`_grid_neighbours`), compared as shifted views of
+    the distances rather than gathered. Distances are computed in blocks of queries, so memory stays
+    bounded; the cost is k x s.
     """
     s = sample_points.shape[0]
     count = min(count, s)
@@ -109,9 +111,16 @@ def _local_minimum_seeds(sample_points, neighbours, queries, count):
     for start in range(0, queries.shape[0], block):
         q = queries[start:start + block]
         d2 = np.einsum("qsd,qsd->qs", *(2 * [sample_points[None] - q[:, None]]))
-        # ties count as minima, so the two copies of a kink sample (one per side) both qualify
-        is_min = np.all(d2[:, neighbours] >= d2[:, :, None] * (1 - 1e-9), axis=-1)
-        key = np.where(is_min, d2, np.inf)
+        # ties count as minima, so the two copies of a kink sample (one per side) both qualify; a
+        # sample on the grid's edge has itself as its neighbour beyond it, which never disqualifies
+        g = d2.reshape(len(q), *shape)
+        floor = g * (1 - 1e-9)
+        is_min = np.ones(g.shape, bool)
+        is_min[:, 1:] &= g[:, :-1] >= floor[:, 1:]
+        is_min[:, :-1] &= g[:, 1:] >= floor[:, :-1]
+        is_min[:, :, 1:] &= g[:, :, :-1] >= floor[:, :, 1:]
+        is_min[:, :, :-1] &= g[:, :, 1:] >= floor[:, :, :-1]
+        key = np.where(is_min.reshape(len(q), s), d2, np.inf)
         best = np.argpartition(key, count - 1, axis=1)[:, :count]
         order = np.argsort(np.take_along_axis(key, best, 1), axis=1)
         best = np.take_along_axis(best, order, 1)
@@ -203,8 +212,7 @@ def closest_point_curve(curve, points):
     """
     queries = _queries(points, curve.dim)
     params, breaks = _samples(curve.knots, curve.degree, curve.n, _polygon(curve.ctrl, 0))
-    neighbours = _grid_neighbours(params.size, 1)[:, :2]
-    seeds = _local_minimum_seeds(curve.evaluate(params), neighbours, queries, SEEDS)
+    seeds = _local_minimum_seeds(curve.evaluate(params), (params.size, 1), queries, SEEDS)
     count = seeds.shape[1]
     x0 = params[seeds].reshape(-1, 1)
     lo, hi = _piece_bounds(x0, breaks)
@@ -233,7 +241,7 @@ def closest_point_surface(surface, points):
         gv, bv = _samples(surface.knots_v, surface.degree_v, surface.nv, _polygon(surface.ctrl, 1), budget)
         grids.append((gu, gv, surface.evaluate_grid(gu, gv).reshape(-1, 3)))
     (cu, cv, coarse), (fu, fv, fine) = grids
-    basins = _local_minimum_seeds(coarse, _grid_neighbours(cu.size, cv.size), queries, SEEDS - 2)
+    basins = _local_minimum_seeds(coarse, (cu.size, cv.size), queries, SEEDS - 2)
     nearest = _nearest_seeds(fine, _grid_neighbours(fu.size, fv.size), queries, SEEDS - basins.shape[1])
     x0 = np.concatenate([np.stack([cu[basins // cv.size], cv[basins % cv.size]], axis=-1),
                          np.stack([fu[nearest // fv.size], fv[nearest % fv.size]], axis=-1)], axis=1)
