@@ -80,11 +80,12 @@ def _evaluator(surface):
     """(u, v) (m,) each -> S, S_u, S_v (m, 3) each: the surface's per-span power form
     (`rgm.geometry.power_form`, a span lookup and Horner steps; to round-off the same values) where it
     has one, else `_partials`. Marching asks for one point at a time, so the per-call cost is what
-    matters: 32 us against 185 us a point on a 30 x 30 bicubic net."""
+    matters: 32 us against 185 us a point on a 30 x 30 bicubic net; one point goes through the power
+    form's Python-float path (`d1_one`, the same values), 17 us against 41 us."""
     power = power_form(surface)
     if power is None:
         return lambda u, v: _partials(surface, u, v)
-    return lambda u, v: power.d(u, v, 1)
+    return lambda u, v: power.d1_one(float(u[0]), float(v[0])) if len(u) == 1 else power.d(u, v, 1)
 
 
 class _PlaneProblem:

@@ -11,6 +11,7 @@ are left to the exact evaluators.
 """
 from __future__ import annotations
 
+from bisect import bisect_right
 from functools import lru_cache
 
 import numpy as np
@@ -72,6 +73,14 @@ class _Spans:
         self.inner = np.ascontiguousarray(breaks[1:-1])
         self.mid = _midpoints(breaks)
         self.inv = 1.0 / np.diff(breaks)
+        self.lists = (self.inner.tolist(), self.mid.tolist(), self.inv.tolist())
+
+    def locate_one(self, t: float):
+        """`locate` of one parameter, in Python floats (the same operations, so the same values)."""
+        inner, mid, inv = self.lists
+        t = min(max(t, self.lo), self.hi)
+        k = bisect_right(inner, t)
+        return k, (t - mid[k]) * inv[k], inv[k]
 
     def locate(self, t):
         """(span (m,), local x (m,) in [-1/2, 1/2], 1 / span length (m,)) of parameters t (m,) clipped into
@@ -161,6 +170,51 @@ class _SurfacePower:
         ku, xu, iu = self.spans_u.locate(u)
         kv, xv, iv = self.spans_v.locate(v)
         return _pairs(self, ku * self.nsv + kv, xu, iu, xv, iv, order)
+
+    def d1_one(self, u: float, v: float):
+        """`d(u, v, 1)` of one parameter pair: ((1, 3), (1, 3), (1, 3)), the same values. Marching an
+        intersection asks for one point at a time, where numpy's per-call cost is most of `d`'s: this
+        runs the same Horner steps in Python floats, in the same order (so the same roundings)."""
+        p, q, nc = self.p, self.q, self.nc
+        ku, xu, iu = self.spans_u.locate_one(u)
+        kv, xv, iv = self.spans_v.locate_one(v)
+        c = self.flat_t[:, ku * self.nsv + kv].tolist()          # (a, b, c) flattened
+        m = (q + 1) * nc                                          # one power of x_u
+        row, row_d = [], []                                       # in u, per (b, c): value, d/dx_u
+        for j in range(m):
+            out = c[p * m + j]
+            for a in range(p - 1, -1, -1):
+                out = out * xu + c[a * m + j]
+            row.append(out)
+            if p == 0:
+                row_d.append(0.0)
+                continue
+            out = c[p * m + j] * float(p)
+            for a in range(p - 1, 0, -1):
+                out = out * xu + c[a * m + j] * float(a)
+            row_d.append(out)
+        h, hu, hv = [], [], []
+        for k in range(nc):                                        # in v, per coordinate
+            out, out_u = row[q * nc + k], row_d[q * nc + k]
+            for b in range(q - 1, -1, -1):
+                out = out * xv + row[b * nc + k]
+                out_u = out_u * xv + row_d[b * nc + k]
+            h.append(out)
+            hu.append(out_u * iu)
+            if q == 0:
+                hv.append(0.0 * iv)
+                continue
+            out = row[q * nc + k] * float(q)
+            for b in range(q - 1, 0, -1):
+                out = out * xv + row[b * nc + k] * float(b)
+            hv.append(out * iv)
+        if self.rational:
+            w = h[3]
+            pt = [h[0] / w, h[1] / w, h[2] / w]
+            su = [(hu[i] - hu[3] * pt[i]) / w for i in range(3)]
+            sv = [(hv[i] - hv[3] * pt[i]) / w for i in range(3)]
+            return np.array([pt]), np.array([su]), np.array([sv])
+        return np.array([h]), np.array([hu]), np.array([hv])
 
 
 def _in_blocks(block, args, order):
