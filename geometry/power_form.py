@@ -179,7 +179,7 @@ class _SurfacePower:
         ku, xu, iu = self.spans_u.locate_one(u)
         kv, xv, iv = self.spans_v.locate_one(v)
         c = self.flat_t[:, ku * self.nsv + kv].tolist()          # (a, b, c) flattened
-        m = (q + 1) * nc                                          # one power of x_u
+        m = (q + 1) * nc                                          # stride of one power of x_u in c
         row, row_d = [], []                                       # in u, per (b, c): value, d/dx_u
         for j in range(m):
             out = c[p * m + j]
