@@ -162,10 +162,51 @@ def _insert_segment(p, tri, a, b, constrained, n_fixed):
                 raise BackendError("a trimming segment's cavity is not a simple polygon")
             chains[side].append(v)
             v = succ.get(v)
+    if len(np.setdiff1d(ct, np.r_[a, b, chains[0], chains[1]])):
+        # a vertex inside the cavity: the segment passes so near it that every triangle round it is crossed
+        # (the cavity's side runs out to it and back along one uncrossed edge), and the pseudo-polygons
+        # below would drop it; the segment is recovered by edge flips instead, which keep every vertex
+        return _flip_in(p, tri, a, b)
     new = []
     _pseudo_polygon(p, a, b, chains[0], new)
     _pseudo_polygon(p, b, a, chains[1], new)
     return _ccw(p, np.concatenate([tri[~cavity], np.array(new, np.int64).reshape(-1, 3)]))
+
+
+def _flip_in(p, tri, a, b):
+    """Make (a, b) an edge of the counter-clockwise triangles `tri` by flipping the edges that cross it
+    (Sloan, "A fast algorithm for generating constrained Delaunay triangulations", Computers & Structures
+    47(3), 1993): an edge crossed by ab whose two triangles form a strictly convex quadrilateral is
+    replaced by the quadrilateral's other diagonal; one that does not is left for a later round. No
+    vertex is removed. The caller has checked that no segment crosses ab."""
+    pa, pb = p[a], p[b]
+    for _ in range(4 * len(tri) + 16):
+        c, d = tri, np.roll(tri, -1, axis=1)
+        oc, od = _orient(pa, pb, p[c]), _orient(pa, pb, p[d])
+        crossing = (oc * od < 0) & (_orient(p[c], p[d], pa) * _orient(p[c], p[d], pb) < 0)
+        if not crossing.any():
+            return tri
+        n = len(p)
+        key = (c * n + d)[crossing]                               # directed crossed edges u -> v
+        rows, cols = np.nonzero(crossing)
+        back = {k: i for i, k in enumerate((d * n + c)[crossing].tolist())}   # the twin's position
+        flipped = False
+        for i, k in enumerate(key.tolist()):
+            j = back.get(k)
+            if j is None:
+                continue
+            t1, t2 = rows[i], rows[j]
+            u, v = tri[t1, cols[i]], tri[t1, (cols[i] + 1) % 3]
+            w = tri[t1, (cols[i] + 2) % 3]                        # (u, v, w) counter-clockwise
+            x = tri[t2, (cols[j] + 2) % 3]                        # (v, u, x) counter-clockwise
+            if _orient(p[x], p[w], p[u]) > 0 and _orient(p[w], p[x], p[v]) > 0:   # u, x, v, w convex
+                tri = tri.copy()
+                tri[t1], tri[t2] = (u, x, w), (x, v, w)
+                flipped = True
+                break
+        if not flipped:
+            raise BackendError("a trimming segment could not be recovered by edge flips")
+    raise BackendError("a trimming segment could not be recovered by edge flips")
 
 
 def _regions(p, tri, constrained, n_real):
