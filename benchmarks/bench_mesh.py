@@ -1,9 +1,9 @@
 """Tessellation benchmark: rgm's certified mesher beside OpenCASCADE's BRepMesh_IncrementalMesh.
 
 The same models (the pin revolution, a fitted bicubic patch, a trimmed patch with a hole; with OpenCASCADE
-also three CadQuery parts written to IGES by OpenCASCADE and read by `rgmc import`: a bracket with a
-hole and filleted corners, a loft, and a plate with 36 holes (46 faces: how the cost scales with the
-face count), shells of trimmed faces bounded by 3-D curves) are meshed by both at the
+also four CadQuery parts written to IGES by OpenCASCADE and read by `rgmc import`: a bracket with a
+hole and filleted corners, a loft, and plates with 36 and 324 holes (46 and 334 faces: how the cost
+scales with the face count), shells of trimmed faces bounded by 3-D curves) are meshed by both at the
 same deflection; both meshes' deviation is measured the same way (every triangle sampled on
 a 6-step barycentric lattice, closest point on rgm's exact surface from a global KD-tree seed + Newton).
 Prints triangle counts, times (best of 3, after a warm-up of both), measured deviations and ratios, and
@@ -51,9 +51,12 @@ def imported_parts(folder):
     from rgm.cli import main
 
     holes = [(x, y) for x in np.linspace(-40, 40, 6) for y in np.linspace(-40, 40, 6)]
+    many = [(x, y) for x in np.linspace(-40, 40, 18) for y in np.linspace(-40, 40, 18)]
     solids = {"bracket (IGES)": cq.Workplane().box(40, 20, 5).faces(">Z").workplane().hole(6).edges("|Z").fillet(3),
               "loft (IGES)": cq.Workplane().circle(5).workplane(offset=10).rect(6, 6).loft(),
               "plate 46 faces": cq.Workplane().box(100, 100, 5).faces(">Z").workplane().pushPoints(holes).hole(3)
+              .edges("|Z").fillet(2),
+              "plate 334 faces": cq.Workplane().box(100, 100, 5).faces(">Z").workplane().pushPoints(many).hole(1.5)
               .edges("|Z").fillet(2)}
     out = {}
     for name, solid in solids.items():
