@@ -179,14 +179,13 @@ def _flip_in(p, tri, a, b):
     47(3), 1993): an edge crossed by ab whose two triangles form a strictly convex quadrilateral is
     replaced by the quadrilateral's other diagonal; one that does not is left for a later round. No
     vertex is removed. The caller has checked that no segment crosses ab."""
-    pa, pb = p[a], p[b]
+    pa, pb, n = p[a], p[b], len(p)
     for _ in range(4 * len(tri) + 16):
         c, d = tri, np.roll(tri, -1, axis=1)
         oc, od = _orient(pa, pb, p[c]), _orient(pa, pb, p[d])
         crossing = (oc * od < 0) & (_orient(p[c], p[d], pa) * _orient(p[c], p[d], pb) < 0)
         if not crossing.any():
             return tri
-        n = len(p)
         key = (c * n + d)[crossing]                               # directed crossed edges u -> v
         rows, cols = np.nonzero(crossing)
         back = {k: i for i, k in enumerate((d * n + c)[crossing].tolist())}   # the twin's position
@@ -314,10 +313,10 @@ def _insert_local(p, tri, n_old, seg):
 
     Bowyer-Watson for many points at once: a triangle survives unchanged when its circumcircle holds
     none of the new points (it stays Delaunay); the others, grown by round-off margins (a larger cavity
-    is only more work), form the cavity (so a Delaunay triangulation gets the one made from scratch; any
-    other, such as the lattice cells `_fresh` splits apart, a valid one), which is triangulated again (`_triangulate`) from its vertices
+    is only more work), form the cavity, which is triangulated again (`_triangulate`) from its vertices
     and the new points with its border and the constrained edges inside it as segments; of that, the
-    regions inside the cavity are kept. The result is checked (every new point used, the cavity's area
+    regions inside the cavity are kept. From a Delaunay triangulation this gives the one made from
+    scratch; from any other (the lattice cells `_fresh` splits apart) a valid one. The result is checked (every new point used, the cavity's area
     kept) and None is returned when it fails, so the caller triangulates from scratch."""
     from scipy.spatial import cKDTree
 
