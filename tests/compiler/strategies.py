@@ -137,8 +137,9 @@ def programs(draw, max_bindings=6, last=None, focus=None):
         name = f"{choice(draw, NAME_PREFIXES)}{i}"
         kind = _head_kind(draw, head)
         if kind in ("other", "member"):
-            value = member_value(draw, env, focus) if kind == "member" else None
-            stmts.append(A.Binding("_" + name, value or other_value(draw, env, focus), False, (), comments()))
+            mine = focus if head == last else None    # the focus is the last binding's (a member's "kind.attr")
+            value = member_value(draw, env, mine) if kind == "member" else None
+            stmts.append(A.Binding("_" + name, value or other_value(draw, env, mine), False, (), comments()))
         elif kind == "fn":
             fn, kinds, result = fn_def(draw, env, f"make{i}", focus if head == last else None)
             stmts.append(A.FnDef(fn.name, fn.params, fn.body, (), comments(), trailing()))
