@@ -77,7 +77,8 @@ def member_value(draw, env, focus=None):
     owners = sorted(k for k in MEMBERS if env.get(k))
     if not owners:
         return None
-    owner = owner if owner in owners else choice(draw, owners)
+    if owner not in owners:   # no binding of the focused kind yet: any member of any kind there is
+        owner, attr = choice(draw, owners), None
     return A.Member(A.Name(choice(draw, env[owner])), attr or choice(draw, sorted(MEMBERS[owner])))
 
 
