@@ -4,15 +4,16 @@ The paper: "B-splines are subdivided where discontinuities take place". For a ra
 `rgm.fitters.freeform_part.split_patches`; this module does it for scattered points (n, 3), such as the
 merged views of a closed or wrapped part:
 
-1. Creases. Robust PCA normals (`rgm.fitters.normals.pca_normals`, Hoppe et al. 1992); a point is a
-   crease point when at least two of its k nearest neighbours have normals more than `angle_deg` away
-   from its own (unoriented normals: |n_i . n_j| is compared). Crease points are set aside, the rest
+1. Creases (`rgm.fitters.creases`). Robust PCA normals (`rgm.fitters.normals.pca_normals`, Hoppe et al.
+   1992); a point is a crease point when at least two of its k nearest neighbours have normals more than
+   `angle_deg` away from its own (unoriented normals: |n_i . n_j| is compared). Crease points are set aside, the rest
    joined by a k-nearest graph (8 neighbours within a few point spacings, normals agreeing) into components
    (`scipy.sparse.csgraph.connected_components`); small components are dropped and each crease point then
    joins the patch on whose local tangent plane it lies, so neighbouring patches meet at the crease
    itself and no point of one face is pulled into its neighbour.
-2. Parameterisation by projection onto a base surface: the best-fit plane when the patch is disc-like
-   (every normal within `max_angle` of the plane normal: the projection is then one-to-one), otherwise a
+2. Parameterisation by projection onto a base surface (`rgm.fitters.patch_base`): the best-fit plane when
+   the patch is disc-like (every normal within `max_angle` of the plane normal: the projection is then
+   one-to-one), otherwise a
    cylinder whose axis is the direction most nearly perpendicular to all normals (the smallest
    eigenvector of sum n n^T) through the least-squares meeting point of the normal lines; u is the angle
    about the axis cut at the largest angular gap, v the height. A patch that wraps fully round (no gap)
@@ -74,12 +75,14 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from rgm.errors import GeometryError
+from rgm.fitters.creases import checked_points, median_spacing, split_scattered, unit_rows
 from rgm.fitters.freeform import Anchors, design_matrix
 from rgm.fitters.freeform_part import FreeformShape, fit_freeform
 from rgm.fitters.normals import pca_normals
+from rgm.fitters.patch_base import Base, Wrap, base_parameters, reach_past
 
-__all__ = ["crease_mask", "split_scattered", "base_parameters", "reach_past", "reach_margins", "Base", "PatchFit",
-           "Gap", "PatchSet", "fit_patches", "seam_anchors", "boundary_samples", "as_written", "g0_gaps"]
+__all__ = ["PatchFit", "Gap", "PatchSet", "fit_patches", "seam_anchors", "boundary_samples", "as_written",
+           "g0_gaps"]
 
 _ANCHOR_WEIGHT = 10.0   # weight of a seam anchor relative to a data point's (`seam_anchors`)
 _GROWTH = 4             # a refitted net has at most this many times the control points (`fit_patches`)
@@ -91,237 +94,6 @@ _WITHIN = ("refitted through a common boundary curve with its neighbour: the sep
 _ANCHOR_TOL = 0.25      # anchors are met within this share of the seam tolerance (`seam_anchors`)
 _ROUNDS = 3              # anchored refit rounds at most (`_share_and_refit`)
 _RESPLIT = 2             # a piece no surface fits is split in halves at most this deep (`_fit_piece`)
-
-
-def _points(points) -> np.ndarray:
-    p = np.asarray(points, float)
-    if p.ndim != 2 or p.shape[1] != 3 or len(p) < 16:
-        raise GeometryError(f"need at least 16 points (n, 3), got an array of shape {p.shape}")
-    if not np.isfinite(p).all():
-        raise GeometryError("points contain NaN or infinite coordinates")
-    return p
-
-
-def _spacing(tree: cKDTree) -> float:
-    """Median nearest-neighbour distance of the tree's points (model units)."""
-    return float(np.median(tree.query(tree.data, k=2, workers=-1)[0][:, 1]))
-
-
-# ------------------------------------------------------------------------------------------ creases
-def _components(points, normals, radius: float, angle_deg: float) -> np.ndarray:
-    """Connected-component labels (n,) of the graph linking each point to its 8 nearest within `radius`
-    whose normals agree within `angle_deg` (normals None: no normal test)."""
-    d, nb = cKDTree(points).query(points, k=min(9, len(points)), distance_upper_bound=radius, workers=-1)
-    linked = np.isfinite(d[:, 1:])
-    pairs = np.c_[np.repeat(np.arange(len(points)), linked.sum(axis=1)), nb[:, 1:][linked]]
-    if normals is not None:
-        cos = np.abs(np.einsum("ij,ij->i", normals[pairs[:, 0]], normals[pairs[:, 1]]))
-        pairs = pairs[cos >= np.cos(np.radians(angle_deg))]
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points), len(points)))
-    return connected_components(graph, directed=False)[1]
-
-
-def crease_mask(points, normals=None, *, angle_deg: float = 35.0, k: int = 16, tree=None) -> np.ndarray:
-    """(n,) bool: points whose neighbourhood (2k nearest) holds at least two unit normals more than
-    `angle_deg` away from the point's own, or whose k nearest are mostly such points (no stray smooth
-    point inside a band). Normals (n, 3) may be unoriented; by default robust PCA normals."""
-    points = _points(points)
-    tree = tree or cKDTree(points)
-    normals = pca_normals(points, k, tree=tree)[0] if normals is None else np.asarray(normals, float)
-    _, idx = tree.query(points, k=int(min(2 * k, len(points))), workers=-1)
-    cos = np.abs(np.einsum("nkd,nd->nk", normals[idx], normals))
-    crease = np.sort(cos, axis=1)[:, 1] < np.cos(np.radians(angle_deg))
-    return crease | (crease[idx[:, :k]].mean(axis=1) >= 0.5)
-
-
-def split_scattered(points, normals=None, *, angle_deg: float = 35.0, k: int = 16, radius: float | None = None,
-                    min_points: int | None = None) -> list[np.ndarray]:
-    """Split scattered points (n, 3) at their creases: index arrays, one a patch, largest first.
-
-    The graph links each smooth point to its 8 nearest smooth points within `radius` (default 5 x the
-    median point spacing) whose normals agree within `angle_deg`: a k-nearest graph follows the sampling
-    density, which varies between overlapping and single views. Components smaller than `min_points`
-    (default 0.25 % of the points, at least 30) are dropped; crease points then join the patch on whose
-    tangent plane they lie, and those with no patch near stay out."""
-    points = _points(points)
-    tree = cKDTree(points)
-    radius = radius or 5 * _spacing(tree)
-    min_points = min_points or max(30, len(points) // 400)
-    normals = pca_normals(points, k, tree=tree)[0] if normals is None else _unit_rows(np.asarray(normals, float))
-    crease = crease_mask(points, normals, angle_deg=angle_deg, k=k, tree=tree)
-    keep = np.nonzero(~crease)[0]
-    if len(keep) == 0:
-        raise GeometryError("every point lies on a crease: lower the crease angle or check the normals")
-    comp = _components(points[keep], normals[keep], radius, angle_deg)
-    sizes = np.bincount(comp)
-    big = np.nonzero(sizes >= min_points)[0]
-    big = big[np.argsort(-sizes[big], kind="stable")]
-    if len(big) == 0:
-        raise GeometryError(f"no patch of at least {min_points} points between the creases")
-    rank = np.full(len(sizes), -1)
-    rank[big] = np.arange(len(big))
-    label = np.full(len(points), -1)
-    label[keep] = rank[comp]
-    # each crease point joins the patch on whose local tangent plane it lies (that of the patch's nearest
-    # smooth point within 4 radius, its normal averaged over its 8 nearest smooth neighbours: one point's
-    # normal tilts near the band), so neighbouring patches meet at the crease and no point of one face is
-    # pulled into the other
-    loose = np.nonzero(label < 0)[0]
-    best = np.full(len(loose), np.inf)
-    for r in range(len(big)):
-        own = np.nonzero(label == r)[0]
-        tree = cKDTree(points[own])
-        d, j = tree.query(points[loose], distance_upper_bound=4 * radius, workers=-1)
-        ok = np.isfinite(d)
-        near = own[j[ok]]
-        k = min(8, len(own))
-        around = own[tree.query(points[near], k=k, workers=-1)[1].reshape(len(near), k)]
-        nrm = normals[around]
-        nrm = _unit_rows(np.einsum("mkd,mk->md", nrm, np.sign(np.einsum("mkd,md->mk", nrm, normals[near]))))
-        off = np.full(len(loose), np.inf)
-        off[ok] = np.abs(np.einsum("ij,ij->i", points[loose[ok]] - points[near], nrm))
-        better = off < best
-        best[better] = off[better]
-        label[loose[better]] = r
-    return [np.nonzero(label == r)[0] for r in range(len(big))]
-
-
-# ---------------------------------------------------------------------------------- parameterisation
-@dataclass(frozen=True)
-class Base:
-    """The base surface a patch was projected onto: kind "plane" or "cylinder"; `agreement` is the 1st
-    percentile of |n . d| over the patch (d: the projection direction), the cosine of its worst angle."""
-
-    kind: str
-    agreement: float
-    closed: bool = False   # a cylinder's full wrap, u its angle over 2 pi (`rgm.fitters.wrap`)
-    wrap: object = field(default=None, compare=False, repr=False)   # a closed wrap's faces: their `Wrap`
-
-
-@dataclass(frozen=True)
-class Wrap:
-    """The closed wrap two faces were cut from (`rgm.fitters.wrap`): its points' indices in the input, their
-    parameters (u its angle over 2 pi, v its height, both in [0, 1]), and the faces' margin past each
-    seam (a share of the turn), which maps a face's u to the wrap's."""
-
-    indices: np.ndarray
-    u: np.ndarray
-    v: np.ndarray
-    delta: float
-
-    def closed_u(self, s: np.ndarray, start: float) -> np.ndarray:
-        """The wrap's u of parameters s (k,) of its face from u = `start` (0 or 1/2)."""
-        return np.mod(np.asarray(s, float) * (0.5 + 2 * self.delta) - self.delta + start, 1.0)
-
-    def start(self, indices: np.ndarray) -> float:
-        """Where the face holding points `indices` (of the input) starts: 0 or 1/2."""
-        return 0.0 if self.u[np.flatnonzero(self.indices == indices[0])[0]] < 0.5 else 0.5
-
-
-def _unit_rows(a):
-    return a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-300)
-
-
-def _plane(points, normals):
-    c = points.mean(axis=0)
-    _, _, vt = np.linalg.svd(points - c, full_matrices=False)
-    uv = (points - c) @ vt[:2].T
-    return uv, float(np.quantile(np.abs(normals @ vt[2]), 0.01))
-
-
-def _cylinder(points, normals):
-    """Axis frame (centre (3,), e1, e2, axis) from the normals, and the agreement of the radial direction."""
-    vec = np.linalg.eigh(normals.T @ normals)[1]
-    axis, e1, e2 = vec[:, 0], vec[:, 1], vec[:, 2]
-    p2 = points @ np.c_[e1, e2]
-    n2 = normals @ np.c_[e1, e2]                  # normals across the axis, length |n x axis|
-    w = np.sum(n2 * n2, axis=1)
-    A = np.eye(2) * w.sum() - n2.T @ n2           # sum (|n|² I - n n^T): the normal lines' meeting point
-    b = w @ p2 - np.einsum("ni,n->i", n2, np.einsum("ni,ni->n", n2, p2))
-    centre2 = np.linalg.solve(A + 1e-9 * np.trace(A) * np.eye(2), b)
-    agree = float(np.quantile(np.abs(np.einsum("ni,ni->n", n2, _unit_rows(p2 - centre2))), 0.01))
-    return centre2, np.c_[e1, e2], axis, agree
-
-
-def base_parameters(points, normals, *, max_angle: float = 75.0, spacing: float | None = None,
-                    depth: int = 3) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, Base]]:
-    """Parameters of a patch by projection onto a base surface: a list of (indices, u, v, base), one
-    entry per piece (a full wrap, or a patch no base projects one-to-one, is split; `depth` bounds the
-    splitting). u, v (m,) are in [0, 1]. points (n, 3), normals (n, 3) unit, unoriented. A patch that
-    fits neither base is split into its mantle (normals across the cylinder axis) and its ends (normals
-    within 45 degrees of the axis), each into connected pieces; pieces under 16 points are left out."""
-    points, normals = _points(points), np.asarray(normals, float)
-    idx = np.arange(len(points))
-    limit = np.cos(np.radians(max_angle))
-    spacing = spacing or _spacing(cKDTree(points))
-    uv, agree_plane = _plane(points, normals)
-    if agree_plane >= limit:
-        return [(idx, *_unit_box(uv), Base("plane", agree_plane))]
-    centre2, basis, axis, agree_cyl = _cylinder(points, normals)
-    if agree_cyl >= limit or depth == 0:
-        if agree_cyl < agree_plane:
-            return [(idx, *_unit_box(uv), Base("plane", agree_plane))]
-        d2 = points @ basis - centre2
-        theta = np.arctan2(d2[:, 1], d2[:, 0])
-        s = np.sort(theta)
-        gaps = np.diff(np.r_[s, s[0] + 2 * np.pi])
-        g = int(np.argmax(gaps))
-        wrap_limit = 4 * spacing / max(float(np.median(np.linalg.norm(d2, axis=1))), 1e-12)
-        start = s[(g + 1) % len(s)]
-        t = np.mod(theta - start, 2 * np.pi)
-        if gaps[g] > wrap_limit or depth == 0:
-            return [(idx, *_unit_box(np.c_[t, points @ axis]), Base("cylinder", agree_cyl))]
-        # a full wrap: one surface closed round the axis (`rgm.fitters.wrap`), u its angle
-        height = _unit_box(np.c_[t, points @ axis])[1]
-        return [(idx, t / (2 * np.pi), height, Base("cylinder", agree_cyl, closed=True))]
-    else:
-        ends = np.abs(normals @ axis) > np.cos(np.pi / 4)
-        if min(ends.sum(), (~ends).sum()) >= 0.05 * len(points):
-            pieces = []
-            for group in (idx[ends], idx[~ends]):
-                comp = _components(points[group], None, 5 * spacing, 0.0)
-                pieces += [group[comp == c] for c in np.unique(comp)]
-        else:                                      # split across the longest extent
-            pieces = [idx[uv[:, 0] < np.median(uv[:, 0])], idx[uv[:, 0] >= np.median(uv[:, 0])]]
-    out = []
-    for part in (p for p in pieces if len(p) >= 16):
-        for sub, u, v, base in base_parameters(points[part], normals[part], max_angle=max_angle,
-                                               spacing=spacing, depth=depth - 1):
-            out.append((part[sub], u, v, base))
-    return out
-
-
-def reach_past(points, u, v, reach: float, most: float = 0.2) -> tuple[np.ndarray, np.ndarray]:
-    """Parameters u, v (n,) in [0, 1] moved into [m, 1 - m] (m per direction, `reach_margins`) so that the
-    surface fitted over [0, 1]² reaches about `reach` (model units) past its data on every side: two
-    neighbours then extend across their crease and cross there, with no domain edge clamping their
-    intersection."""
-    m = reach_margins(points, u, v, reach, most)
-    return m[0] + (1 - 2 * m[0]) * np.asarray(u, float), m[1] + (1 - 2 * m[1]) * np.asarray(v, float)
-
-
-def reach_margins(points, u, v, reach: float, most: float = 0.2) -> np.ndarray:
-    """(2,) the parameter margins along u and v that `reach` (model units) takes: `reach` over the
-    surface's speed in that direction (model units per parameter unit, the median of least-squares
-    Jacobians over each point's 8 nearest neighbours), at most `most`."""
-    points = np.asarray(points, float)
-    uv = np.c_[u, v]
-    k = min(9, len(points))
-    nb = cKDTree(points).query(points, k=k, workers=-1)[1][:, 1:]
-    dx, duv = points[nb] - points[:, None], uv[nb] - uv[:, None]             # (n, k-1, 3), (n, k-1, 2)
-    gram = np.einsum("nki,nkj->nij", duv, duv)
-    ok = np.linalg.det(gram) > 1e-12 * np.einsum("nii->n", gram) ** 2
-    jac = np.linalg.solve(gram[ok], np.einsum("nki,nkd->nid", duv[ok], dx[ok]))  # (m, 2, 3): dS/du, dS/dv
-    speed = np.median(np.linalg.norm(jac, axis=2), axis=0) if ok.any() else np.ones(2)
-    return np.minimum(reach / np.maximum(speed, 1e-300), most)
-
-
-def _unit_box(uv):
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
-    if np.any(hi - lo <= 0):
-        raise GeometryError("a patch's points are collinear: no surface can be parameterised over them")
-    uv = (uv - lo) / (hi - lo)
-    return uv[:, 0], uv[:, 1]
 
 
 # ---------------------------------------------------------------------------------------- fitting
@@ -388,12 +160,12 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
     crease. With `share`, the patches of the seams still over `tol` are fitted again (at tol / 2 where
     that holds) through the common boundary curves of their seams (`seam_anchors`), shared and measured
     again; the refit is kept where it brings more seams within `tol` (module docstring, 4.)."""
-    points = _points(points)
+    points = checked_points(points)
     tree = cKDTree(points)
-    spacing = _spacing(tree)
+    spacing = median_spacing(tree)
     if normals is None:
         normals = pca_normals(points, k, tree=tree)[0]
-    normals = _unit_rows(np.asarray(normals, float))
+    normals = unit_rows(np.asarray(normals, float))
     groups = split_scattered(points, normals, angle_deg=angle_deg, k=k)
     patches, skipped = [], []
     for group in groups:
@@ -807,7 +579,7 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int | None =
     edge lies on that edge's seam, however near a third patch's points); the seam's samples of both
     patches (at most `per_seam` each, evenly taken; None: all) are measured to the other patch's
     (untrimmed) surface by closest points."""
-    points = _points(points)
+    points = checked_points(points)
     label = np.full(len(points), -1)
     for r, p in enumerate(patches):
         label[p.indices] = r

@@ -13,7 +13,7 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    patch belongs to the neighbour (within `near`; gaps of a few samples with no neighbour closed).
 2. The surfaces are intersected (`rgm.geometry.intersect.intersect_surfaces`, at the model tolerance, as
    the IntersectionCurve the file describes approximates it). The least-squares surfaces extend over their
-   whole parameter square, about 5 point spacings past their data (`rgm.fitters.patches.reach_past`), so
+   whole parameter square, about 5 point spacings past their data (`rgm.fitters.patch_base.reach_past`), so
    near a crease they usually cross. The branch that both seams follow is taken (most run samples
    within `near`, their order along the run matching the branch's); its stretch under the seams, the
    mean of the two faces' ends, is the shared edge, its ends the joins: one 3-D point each, seen on both

@@ -1,6 +1,6 @@
 """A full wrap as one surface closed round its axis, cut into two faces that share their seams exactly.
 
-A patch whose points go all the way round a cylinder-like base (`rgm.fitters.patches.base_parameters`: no
+A patch whose points go all the way round a cylinder-like base (`rgm.fitters.patch_base.base_parameters`: no
 gap in its angle) is no clamped surface over that angle: the two ends of its parameter range are the same
 points. Fitted as two halves apart, the halves meet only as nearly as their extrapolations happen to (YCB
 mustard bottle, views with seed 3: 2.82 mm at a 1 mm tolerance), tangentially, where no intersection
@@ -23,6 +23,7 @@ import numpy as np
 
 from rgm.errors import GeometryError
 from rgm.fitters.freeform import SurfaceFit, fit_stats, statistic_value
+from rgm.fitters.patch_base import reach_margins
 from rgm.geometry.knots import rescale_knots, split_knots
 
 __all__ = ["arc", "fit_wrap", "seam_margin"]
@@ -58,8 +59,7 @@ def arc(knots_u, ctrl, degree_u: int, a: float, b: float) -> tuple[np.ndarray, n
 
 def seam_margin(points, u, v, reach: float) -> float:
     """How far past each seam a face of the wrap reaches, as a share of the turn: `reach` (model units)
-    over the speed along u (`rgm.fitters.patches.reach_margins`), within [0.001, 0.1]."""
-    from rgm.fitters.patches import reach_margins
+    over the speed along u (`rgm.fitters.patch_base.reach_margins`), within [0.001, 0.1]."""
 
     return float(np.clip(reach_margins(points, u, v, reach)[0], 1e-3, 0.1)) if reach > 0 else 1e-3
 
@@ -75,7 +75,6 @@ def fit_wrap(points, u, v, tol: float, *, statistic: str = "p95", max_ctrl: int 
     Raises GeometryError when a half misses `tol` (`statistic`)."""
     from rgm.fitters.freeform_part import fit_freeform
     from rgm.fitters.freeform_surface import fit_surface
-    from rgm.fitters.patches import reach_margins
 
     t0 = time.perf_counter()
     points, u, v = np.asarray(points, float), np.asarray(u, float), np.asarray(v, float)

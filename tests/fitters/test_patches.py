@@ -18,7 +18,9 @@ from rgm.fitters.filters import statistical_outliers
 from rgm.fitters.emit import write_rgm
 from rgm.fitters.freeform_build import patch_part
 from rgm.fitters.freeform_part import emit_freeform_set
-from rgm.fitters.patches import base_parameters, fit_patches, split_scattered
+from rgm.fitters.creases import split_scattered
+from rgm.fitters.patch_base import base_parameters
+from rgm.fitters.patches import fit_patches
 from rgm.fitters.trimloops import check_loops
 from rgm.fitters.normals import pca_normals
 from rgm.model import TrimmedFace
@@ -227,12 +229,13 @@ def test_a_piece_no_surface_fits_over_its_projection_is_split_and_its_halves_hol
     parameterised again: both hold with about 30 control points. (On the YCB meat can, seeds 2-4 of the
     views, pieces of the lid's corner projected onto a cylinder failed so before; with the split every patch
     holds and 29-33 seams are within 1 mm, 20-24 before.)"""
-    from rgm.fitters.patches import Base, _fit_patch, _fit_piece, _unit_box, reach_past
+    from rgm.fitters.patch_base import Base, reach_past, unit_box
+    from rgm.fitters.patches import _fit_patch, _fit_piece
 
     rng = np.random.default_rng(5)
     t, y = rng.uniform(0.0, np.pi, 3000), rng.uniform(0, 40, 3000)
     p = np.c_[20 * np.cos(t), y, 20 * np.sin(t)] + rng.normal(0, 0.01, (3000, 3))
-    idx, uv = np.arange(len(p)), _unit_box(p[:, :2])
+    idx, uv = np.arange(len(p)), unit_box(p[:, :2])
     one = _fit_patch(p, idx, Base("plane", 0.0), reach_past(p, *uv, 3.5), 0.05, "max", 4000)
     assert not one.shape.fit.stats.holds and "approximation limit" in one.shape.fit.stopped
     notes = []

@@ -136,7 +136,7 @@ def plane_face(width, height, rng):
     from scipy.spatial import cKDTree
 
     from rgm.fitters.freeform_part import fit_freeform
-    from rgm.fitters.patches import reach_past
+    from rgm.fitters.patch_base import reach_past
     from rgm.fitters.shared_edges import _Loop, _loop_samples
 
     n = int(width * height / 0.25)
