@@ -270,10 +270,10 @@ class PatchStack:
     each. Restricted patches share their whole surface's form and keep their own domains."""
 
     def __init__(self, patches):
-        wholes = {id(p.whole): p.whole for p in patches}
-        slot = {k: i for i, k in enumerate(wholes)}
+        wholes = tuple({id(p.whole): p.whole for p in patches}.values())
+        slot = {id(w): i for i, w in enumerate(wholes)}
         self.surface = np.array([slot[id(p.whole)] for p in patches], np.intp)
-        self.form = SurfaceStack([w.power for w in wholes.values()])
+        self.form = _surface_stack(wholes)
         self.lo = np.array([(p.domain[0][0], p.domain[1][0]) for p in patches])
         self.hi = np.array([(p.domain[0][1], p.domain[1][1]) for p in patches])
 
@@ -286,6 +286,23 @@ class PatchStack:
 
     def evaluate(self, which, u, v) -> np.ndarray:
         return self.form.d(self.surface[which], u, v, 0)[0]
+
+
+#: a SurfaceStack whose coefficients take at most this many bytes is kept for the next call on the same
+#: surfaces (refinement passes ask for the same sets again and again; setting one up costs ~0.1 ms, as
+#: much as evaluating a small face); larger ones are built each time (copies of big nets would add up)
+_KEEP_STACK_BYTES = 1 << 20
+
+
+def _surface_stack(wholes: tuple) -> SurfaceStack:
+    """The SurfaceStack of whole patches `wholes`, kept with the first of them when it is small."""
+    kept = wholes[0].__dict__.setdefault("_stacks_kept", {})
+    stack = kept.get(wholes)
+    if stack is None:
+        stack = SurfaceStack([w.power for w in wholes])
+        if stack.flat_t.nbytes <= _KEEP_STACK_BYTES:
+            kept[wholes] = stack
+    return stack
 
 
 def stack_key(patch):
