@@ -753,15 +753,52 @@ def surface_type(face) -> str:
 
 
 def distances_to_shape(points, shape) -> np.ndarray:
-    """(k,) distances of points (k, 3) to a shape (``BRepExtrema_DistShapeShape`` from a vertex)."""
+    """(k,) distances of points (k, 3) to a shape: ``BRepExtrema_DistShapeShape`` from a vertex and, where
+    that finds nothing within 1e-9 of the shape's size, also the point's nearest foot on each face's
+    surface that lies inside the face (``GeomAPI_ProjectPointOnSurf``, ``BRepClass_FaceClassifier``):
+    DistShapeShape can stop at a local minimum (on a surface of revolution of a B-spline generatrix it
+    gave 0.058 mm for a point on the surface of an 8 mm solid, and a verified file was refused). Both
+    are distances to points of the shape, so the smaller is one too."""
+    from OCP.BRep import BRep_Tool
     from OCP.BRepBuilderAPI import BRepBuilderAPI_MakeVertex
+    from OCP.BRepClass import BRepClass_FaceClassifier
     from OCP.BRepExtrema import BRepExtrema_DistShapeShape
+    from OCP.GeomAPI import GeomAPI_ProjectPointOnSurf
+    from OCP.gp import gp_Pnt2d
+    from OCP.TopAbs import TopAbs_IN, TopAbs_ON
 
     out = np.empty(len(points))
+    faces, exact = None, None
     for i, p in enumerate(np.asarray(points, float)):
         dist = BRepExtrema_DistShapeShape(BRepBuilderAPI_MakeVertex(_pnt(p)).Vertex(), shape)
         out[i] = dist.Value() if dist.IsDone() else np.inf
+        if exact is None:
+            exact = 1e-9 * shape_size(shape)
+        if out[i] <= exact:
+            continue
+        if faces is None:
+            faces = [(f, BRep_Tool.Surface_s(f), BRep_Tool.Tolerance_s(f)) for f in faces_of(shape)]
+        for face, surface, tol in faces:
+            foot = GeomAPI_ProjectPointOnSurf(_pnt(p), surface)
+            if not foot.NbPoints() or foot.LowerDistance() >= out[i]:
+                continue
+            u, v = foot.LowerDistanceParameters()
+            if BRepClass_FaceClassifier(face, gp_Pnt2d(u, v), tol).State() in (TopAbs_IN, TopAbs_ON):
+                out[i] = foot.LowerDistance()
     return out
+
+
+def shape_size(shape) -> float:
+    """The diagonal of a shape's bounding box (model units)."""
+    from OCP.Bnd import Bnd_Box
+    from OCP.BRepBndLib import BRepBndLib
+
+    box = Bnd_Box()
+    BRepBndLib.Add_s(shape, box)
+    if box.IsVoid():
+        return 0.0
+    x0, y0, z0, x1, y1, z1 = box.Get()
+    return float(np.linalg.norm([x1 - x0, y1 - y0, z1 - z0]))
 
 
 def is_valid(shape) -> bool:
