@@ -103,19 +103,21 @@ def patch_part(result) -> FreeformPart:
                                                     if p.base.wrap is not None else "")
         out.info.append(_describe(p.shape, how, len(p.indices), p.seconds))
     for g in result.gaps:
+        rest = f"; beyond its ends the loops' data pieces leave up to {g.rest:.4f} mm" if g.rest > g.max else ""
         if g.shared and g.curve:
             out.notes.append(f"patches {g.i + 1} | {g.j + 1}: one shared edge, a curve midway between their surfaces "
                              f"(seam_{g.i + 1}_{g.j + 1}, {g.length:.1f} mm; they do not cross along it): G0 gap "
                              f"on it max {g.max:.2g} mm, p95 {g.p95:.2g} mm ({g.samples} samples of both faces' "
-                             f"edges); separate trims were {g.before:.4f} mm apart")
+                             f"edges); separate trims were {g.before:.4f} mm apart{rest}")
         elif g.shared:
             out.notes.append(f"patches {g.i + 1} | {g.j + 1}: one shared edge, the intersection of their surfaces "
                              f"({g.length:.1f} mm): G0 gap on it max {g.max:.2g} mm, p95 {g.p95:.2g} mm ({g.samples} "
                              f"samples of both faces' edges as approximated at the tolerance); separate trims "
-                             f"were {g.before:.4f} mm apart")
+                             f"were {g.before:.4f} mm apart{rest}")
         else:
             out.notes.append(f"patches {g.i + 1} | {g.j + 1}: G0 gap max {g.max:.4f} mm, p95 {g.p95:.4f} mm "
-                             f"({g.samples} boundary samples; separate trims: {g.why or 'not shared'})")
+                             f"({g.samples} boundary samples, to the nearest other face; separate trims: "
+                             f"{g.why or 'not shared'})")
     if result.unassigned:
         out.notes.append(f"{result.unassigned} points belong to no patch")
     return out

@@ -140,17 +140,18 @@ class TrimmedNurbs:
     def inner_distance(self, points: np.ndarray, iterations: int = 10) -> np.ndarray:
         """(n,) distances of points (n, 3) to points of the face found from inside: the nearest sample
         of a dense (u, v) grid on the face, then `foot_distances` steps that stay on the face (model units)."""
-        uv, xyz = self._dense()
-        d, j = cKDTree(xyz).query(points)
+        uv, xyz, tree = self._dense()
+        d, j = tree.query(points)
         return foot_distances(self.surface, uv[j], points, d, self.inside, iterations)
 
     def _dense(self):
-        """(u, v) (k, 2) and points (k, 3) of a dense sample of the face (about 1/250 of its size apart),
-        its boundary included."""
+        """(u, v) (k, 2), points (k, 3) and their KD-tree, of a dense sample of the face (about 1/250 of
+        its size apart), its boundary included; made once (a face is measured again and again)."""
         if not hasattr(self, "_dense_cache"):
             size = float(np.ptp(self.bounds(), axis=0).max())
             uv = np.vstack([self._inside_grid(size / 250), *self.loops])
-            self._dense_cache = (uv, self.surface.evaluate(uv[:, 0], uv[:, 1]))
+            xyz = self.surface.evaluate(uv[:, 0], uv[:, 1])
+            self._dense_cache = (uv, xyz, cKDTree(xyz))
         return self._dense_cache
 
     def distance(self, points) -> np.ndarray:

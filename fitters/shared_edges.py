@@ -32,6 +32,10 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    loop back on itself along the stretch in either surface's parameters (surfaces that nearly touch
    cross in small loops: on the meat can, with other views, OpenCASCADE's edge crossed itself there and
    the face was refused).
+   Corners (`_corner_joins`): where three patches each share an edge with the other two and one end of
+   each lies near the others', those ends move along their branches to a quarter of the tolerance
+   short of the point all three surfaces share, so the faces meet at the corner (a box fitted at
+   0.2 mm: 0.035 mm face to face at its corners, 1.49 mm when each face rounded them off on its data).
 3. Loops (`rebuild_loop`): the loop's run is replaced by a `SharedEdge` piece and the rest of the loop,
    from the data as before, is re-fitted from join to join (`rgm.fitters.trimloops.fit_open_chain`: split
    at corners, ends fixed on the joins) after dropping the data samples the shared edge covers. Two shared
@@ -303,6 +307,62 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
     return _Candidate(i, j, xyz, uv, lo, hi, runs, rising, branches)
 
 
+def _triple_point(surfaces, x0, tol: float):
+    """The point (3,) where three surfaces meet, by Gauss-Newton on their six parameters (S_a = S_b = S_c)
+    from their closest points to x0 (3,); None when it does not converge to within tol / 100."""
+    from rgm.geometry.inversion import closest_point_surface
+
+    uv = np.concatenate([np.r_[closest_point_surface(s, x0[None])[:2]].ravel() for s in surfaces])
+    lo = np.concatenate([[s.domain[0][0], s.domain[1][0]] for s in surfaces])
+    hi = np.concatenate([[s.domain[0][1], s.domain[1][1]] for s in surfaces])
+    for _ in range(30):
+        d = [s.derivatives(uv[2 * k:2 * k + 1], uv[2 * k + 1:2 * k + 2], 1)[:, :, 0] for k, s in enumerate(surfaces)]
+        pts = [x[0, 0] for x in d]
+        r = np.r_[pts[0] - pts[1], pts[1] - pts[2]]
+        jac = np.zeros((6, 6))
+        for row, (a, b) in enumerate(((0, 1), (1, 2))):
+            jac[3 * row:3 * row + 3, 2 * a:2 * a + 2] = np.c_[d[a][1, 0], d[a][0, 1]]
+            jac[3 * row:3 * row + 3, 2 * b:2 * b + 2] = -np.c_[d[b][1, 0], d[b][0, 1]]
+        step = np.linalg.lstsq(jac, -r, rcond=None)[0]
+        uv = np.clip(uv + step, lo, hi)
+        if np.abs(step).max() < 1e-13:
+            break
+    return np.mean(pts, axis=0) if np.linalg.norm(r) <= tol / 100 else None
+
+
+def _corner_joins(cands: dict, shapes, tol: float, near: float) -> None:
+    """Stretches meeting at a corner of three patches end at the corner (in place): where each pair of
+    three patches has a candidate (an intersection, not a seam curve) and one end of each lies within
+    `near` of the others, each of those ends moves along its branch to `tol` / 4 short of the point all
+    three surfaces share. Each face's loop keeps a data piece between its two shared edges there (the back
+    ends take a shared edge between its neighbouring pieces' ends), now `tol` / 2 long, so the three faces
+    meet at the corner instead of each rounding it off on its own data (the stretches end where both
+    faces' seam runs do, some point spacings short of it)."""
+    pairs = {pair for pair, c in cands.items() if c.curve is None}
+    faces = sorted({f for pair in pairs for f in pair})
+    for a, b, c in ((a, b, c) for a in faces for b in faces for c in faces if a < b < c):
+        trio = [(a, b), (b, c), (a, c)]
+        if not all(t in pairs for t in trio):
+            continue
+        options = [[(t, end) for end in ("lo", "hi")] for t in trio]
+        for choice in ((x, y, z) for x in options[0] for y in options[1] for z in options[2]):
+            at = np.array([cands[t].xyz[getattr(cands[t], end)] for t, end in choice])
+            centre = at.mean(axis=0)
+            if np.linalg.norm(at - centre, axis=1).max() > near:
+                continue
+            corner = _triple_point([shapes[f].nurbs() for f in (a, b, c)], centre, tol)
+            if corner is None or np.linalg.norm(corner - centre) > near:
+                continue
+            for t, end in choice:
+                cand = cands[t]
+                gap = np.linalg.norm(cand.xyz - corner, axis=1)
+                at_corner = int(np.argmin(gap))
+                inward = np.arange(at_corner, cand.hi if end == "lo" else cand.lo, 1 if end == "lo" else -1)
+                clear = inward[gap[inward] >= tol / 4]
+                if len(clear) and (clear[0] < cand.hi if end == "lo" else clear[0] > cand.lo):
+                    setattr(cand, end, int(clear[0]))
+
+
 def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float):
     """(pieces, outline, along): face k's outer pieces with its runs (one per candidate, none
     overlapping) replaced by SharedEdge pieces, the rest re-fitted from join to join (within `tol_uv`,
@@ -492,6 +552,7 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
             why[(g.i, g.j)] = c
         else:
             cands[(g.i, g.j)] = c
+    _corner_joins(cands, shapes, tol, near)
     reach = near + tol
     measured = {}
     while True:   # rebuild the loops, measure the edges; drop what fails and go again

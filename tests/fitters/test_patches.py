@@ -34,11 +34,13 @@ MEAT_CAN = YCB / "010_potted_meat_can_textured.obj"
 
 
 def written_gaps(points, result, model, step=0.1):
-    """{(i, j): max gap} of the seams not shared, measured on the written file (an oracle for
+    """{(i, j): max gap} of the seams, measured on the written file (an oracle for
     `rgm.fitters.patches.as_written`): the 2-D pieces of each face's outer loop as rgm reads it back (the
     data pieces: a shared edge's samples lie on its own seam), sampled about `step` mm apart; a sample lies
     on the seam with the patch owning the nearest other input point within 5 point spacings, and is
-    measured to that patch's surface."""
+    measured to the nearest other face of the file read back (`TrimmedNurbs.from_model`: trimmed as
+    written) among the patches with input points within those 5 spacings."""
+    from rgm.fitters.freeform_measure import TrimmedNurbs
     from rgm.model import IntersectionCurve
 
     tree = cKDTree(points)
@@ -46,6 +48,8 @@ def written_gaps(points, result, model, step=0.1):
     label = np.full(len(points), -1)
     for k, q in enumerate(result.patches):
         label[q.indices] = k
+    faces = [TrimmedNurbs.from_model(model.objects[f"patch_{k + 1}"]) for k in range(len(result))]
+    trees = [cKDTree(points[label == k]) for k in range(len(result))]
     out = {}
     for a in range(len(result)):
         face = model.objects[f"patch_{a + 1}"]
@@ -64,10 +68,14 @@ def written_gaps(points, result, model, step=0.1):
         others = np.flatnonzero((label >= 0) & (label != a))
         d, j = cKDTree(points[others]).query(xyz, distance_upper_bound=near)
         owner = np.where(np.isfinite(d), label[others[np.minimum(j, len(others) - 1)]], -1)
+        gap = np.full(len(xyz), np.inf)
+        for b in range(len(result)):
+            close = (owner >= 0) & np.isfinite(trees[b].query(xyz, distance_upper_bound=near)[0]) if b != a else None
+            if close is not None and close.any():
+                gap[close] = np.minimum(gap[close], faces[b].distance(xyz[close]))
         for b in np.unique(owner[owner >= 0]):
-            gap = float(result.patches[b].shape.distance(xyz[owner == b]).max())
             pair = (min(a, b), max(a, b))
-            out[pair] = max(out.get(pair, 0.0), gap)
+            out[pair] = max(out.get(pair, 0.0), float(gap[owner == b].max()))
     return out
 
 
@@ -159,14 +167,20 @@ def test_box_patches_meet_the_tolerance_and_every_edge_has_a_measured_gap():
     assert len(result.gaps) == 12
     spacing = np.median(cKDTree(p).query(p, k=2)[0][:, 1])
     # every edge is one shared intersection: the gap measured along it (as the back ends approximate it,
-    # at the tolerance) is far below what the separate trims had (a few point spacings: measured too)
+    # at the tolerance) is far below what the separate trims had (a few point spacings: measured too).
+    # The seams are measured face to face, corners included: each edge runs to tol / 4 short of the
+    # corner where its three planes meet (`shared_edges._corner_joins`), so the faces' short data pieces
+    # there leave at most a fraction of the tolerance (ending where the seam runs ended, the edges left
+    # every corner rounded off on each face's own data: 1.49 mm)
     assert all(g.shared for g in result.gaps)
-    gaps, before = np.array([g.max for g in result.gaps]), np.array([g.before for g in result.gaps])
+    edges, before = np.array([g.max for g in result.gaps]), np.array([g.before for g in result.gaps])
+    rest = np.array([g.rest for g in result.gaps])
     assert np.all(before > 0) and before.max() < 10 * spacing
-    assert gaps.max() <= 0.2 and gaps.max() < 0.01 * before.min()
+    assert edges.max() < 0.01 * before.min() and rest.max() <= 0.5 * 0.2
     print(f"box: {len(result)} patches, ctrl {[s.fit.n_ctrl for s in result.shapes]}, "
-          f"p95 {[round(s.fit.stats.p95, 3) for s in result.shapes]}, G0 gap max {gaps.max():.2g} mm on the "
-          f"shared edges (separate trims: {before.max():.2f} mm, {before.max() / spacing:.1f} spacings), {seconds:.1f} s")
+          f"p95 {[round(s.fit.stats.p95, 3) for s in result.shapes]}, G0 gap max {edges.max():.2g} mm on the "
+          f"shared edges, {rest.max():.2g} mm face to face at the corners (separate trims: {before.max():.2f} "
+          f"mm, {before.max() / spacing:.1f} spacings), {seconds:.1f} s")
 
 
 def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two(tmp_path):
@@ -292,34 +306,37 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     assert len(gaps) >= len(result) - 1 and np.all(np.isfinite(gaps))
     # the bottom, shoulder and cap creases are shared where the surfaces cross (each reaches past its data,
     # so no domain edge clamps the intersection): within the tolerance along the edge; every pair not
-    # shared says why. The patches of the seams still over 1 mm (9 of 21) are fitted again at 0.5 mm through
-    # their common boundary curves as anchors (the midpoints between the two surfaces along both faces' trims;
-    # along a shared edge, the current intersection): all 21 seams are then within the tolerance, worst 0.64
-    # mm, 4 shared, with each surface held past its data to bend no more than over them (`Extension`; worst
-    # 0.91 mm without; 0.95 mm, 3 shared, with the body's wrap as two halves apart). 20 within, worst 1.23 mm
-    # (the wrap halves 1-2), 4 shared, with the patches that share an edge refitted without anchors; 16 with a
-    # plain refit at 0.5 mm; 7 of 18 before the surfaces reached past their data. The body's wrap is one
-    # surface closed round its axis, its two faces meeting along the same curve (0 mm)
+    # shared says why. Seams are measured face to face as written (a boundary sample to the nearest other
+    # trimmed face): 10 of 21 within 1 mm, worst 3.95 mm (median of the others 2.30 mm), 6 shared, their
+    # edges within 0.15 mm. Measured
+    # to the other patch's untrimmed surface instead, as before 2026-12-06, the same kind of fit read 21 of
+    # 21, worst 0.64 mm: a trim that stops short of its neighbour's leaves a hole however near the
+    # surfaces pass, and at the cap's three-patch corners and slivers the trims stop 2-4 mm short. The
+    # body's wrap is one surface closed round its axis, its two faces meeting along the same curve
     shared = [g for g in result.gaps if g.shared]
-    assert any(g.max < 1e-9 and "closed round its axis" in g.why for g in result.gaps)
+    assert any("closed round its axis" in g.why and not g.shared for g in result.gaps)
     assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     within = sum(g.max <= 1.0 for g in result.gaps)
-    assert within >= 21 and gaps.max() <= 1.0
+    assert within >= 8   # a regression floor (10 here; figures move with the machine's rounding)
     assert max(g.max for g in shared) < min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
     for g in shared:   # one binding, used by both faces' loops
         assert_one_binding_in_both_loops(text, g)
     apart = [g for g in result.gaps if not g.shared]
     # the gaps reported are those of the loops as written (a face with shared edges has its data loop
-    # re-fitted between their joins): measured again on the file read back, every sample 0.1 mm apart
+    # re-fitted between their joins): measured again on the file read back, every sample 0.1 mm apart, to
+    # the faces as rgm reads them back
     written = written_gaps(p, result, model)
-    for g in apart:
+    for g in result.gaps:
         if (g.i, g.j) in written and "closed round its axis" not in g.why:
-            assert abs(written[(g.i, g.j)] - g.max) <= 0.1, (g.i, g.j, g.max, written[(g.i, g.j)])
+            if g.shared:   # the file's data pieces near the neighbour; the edge itself is measured along it
+                assert abs(written[(g.i, g.j)] - g.rest) <= 0.1, (g.i, g.j, g.rest, written[(g.i, g.j)])
+            else:
+                assert abs(written[(g.i, g.j)] - g.max) <= 0.1, (g.i, g.j, g.max, written[(g.i, g.j)])
     print(f"mustard: {len(p)} points, {len(result)} patches, ctrl {[s.fit.n_ctrl for s in result.shapes]}, "
           f"p95 {[round(s.fit.stats.p95, 2) for s in result.shapes]}, "
           f"max {[round(s.fit.stats.max, 2) for s in result.shapes]}; {len(shared)} of {len(gaps)} seams shared, "
-          f"{within} within 1 mm; G0 gap on the shared ones max {max(g.max for g in shared):.3f} mm (separate trims "
+          f"{within} within 1 mm; G0 gap on the shared edges max {max(g.max for g in shared):.3f} mm (separate trims "
           f"{[round(g.before, 2) for g in shared]} mm); the others max {max(g.max for g in apart):.2f} mm, "
           f"median {np.median([g.max for g in apart]):.2f} mm, {seconds:.1f} s")
 
@@ -340,21 +357,12 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     assert all(s.fit.stats.holds and s.fit.stats.p95 <= 1.0 for s in result.shapes)
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
-    # 36 of 41 seams within 1 mm, worst 2.81 mm, measured on the loops as written (seeds 2-4 of the views
-    # 39/54, 25/40, 35/50, worst up to 3.98 mm: the bound below guards against regressions, with room for
-    # other machines' choices). Measured on the data loops, as before (3-6 seams a view set better than the
-    # written files): 37 of 41, worst 2.12 mm (seeds 2-4 46/52, 29/40, 42/50; 45/51, 27/40, 38/50 with
-    # rebuilt loops held to an area bound, not a band about the data loop), with each surface held past
-    # its data to bend no more than over them (`Extension`; 32 of 41, worst 1.81 mm, without; seeds 2-4
-    # 31/52, 31/40, 36/50). Before that: 37 of 42, worst 1.77 mm, with the can's mantle one surface
-    # closed round its axis
-    # (its two faces' seams the same curve; 33 of 42, worst 2.66 mm, fitted as two halves apart): the
-    # patches of the loose seams refitted through common boundary curves,
-    # those with a shared edge held to it, a refitted patch whose own seams did worse put back, in up to
-    # three rounds (29 of 42 in one); 28 of 42 with each linked group's refit kept or dropped whole, 20 with
-    # a plain refit at 0.5 mm, 6 of 32 before the surfaces reached past their data. Worst 2.66 mm. The
-    # figures move with each intersection's approximation (36 of 43, worst 3.38 mm, with branches marched
-    # again at finer steps instead of subdivided): seam curves are tested on the tube (test_seam_curves.py)
+    # Seams measured face to face as written (a boundary sample to the nearest other trimmed face, `g0_gaps`):
+    # 19 of 41 within 1 mm, worst 3.39 mm, 11 shared (2 as seam curves), their edges within 1 mm. Measured
+    # to the other patch's untrimmed surface instead, as before 2026-12-06: 36 of 41, worst 2.81 mm (seeds
+    # 2-4 39/54, 25/40, 35/50), and earlier, measured on the data loops, 37 of 41: the rolled rim's slivers
+    # and the lid's three-patch corners leave trims that stop 1-4 mm short of their neighbours' (the
+    # history of those figures is in docs/fitting.md and the commit log)
     gaps = [g.max for g in result.gaps]
     curves = [g for g in shared if g.curve]
     print(f"meat can: {len(shared)} of {len(gaps)} seams shared ({len(curves)} as seam curves), "
@@ -363,7 +371,7 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     # the figures move by machine (floating-point differences steer discrete choices: the segmentation's
     # pieces, the knots inserted): without the extension 37 of 42, worst 1.77 mm, on one; 32 of 41, worst
     # 1.81 mm, on another
-    assert sum(g <= 1.0 for g in gaps) >= 30 and max(gaps) < 4.0
+    assert sum(g <= 1.0 for g in gaps) >= 15 and max(gaps) < 6.0   # regression bounds (19 and 3.39 mm here)
     assert all(g.max < g.before for g in curves)
     assert all(g.why for g in result.gaps if not g.shared)
     text, _ = patches_text(result, 1.0, title="meat can")
