@@ -34,7 +34,10 @@ def validate(model: O.Model) -> list[Diagnostic]:
     out: list[Diagnostic] = []
     seen: set[int] = set()
     for obj in model.objects.values():
-        _visit(obj, model.tolerance, out, seen)
+        try:
+            _visit(obj, model.tolerance, out, seen)
+        except GeometryError as exc:   # a form made on demand that cannot be (a net whose numbers overflow)
+            out.append(error("E0510", str(exc), _span(obj), "cannot be built"))
     return out
 
 

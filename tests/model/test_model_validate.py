@@ -31,6 +31,16 @@ def test_profile_crossing_the_axis():
     assert text.startswith("polyline(") and "crosses its axis" in d.message
 
 
+def test_a_revolution_whose_nurbs_form_overflows_is_an_error_not_a_crash():
+    # numbers near the float limit: the profile is fine, its rational net overflows (found by the program
+    # generator with --hypothesis-profile=explore; the GeometryError escaped validation)
+    body = ("r := revolve(bspline(degree: 1, knots: clamped(1, [0.5]), points: net 3 [0 0 0, 5 0 0, "
+            "5 0 1.3407807929942597e+154]), axis);\nf := trim(r, loop(arc(uv(0.1, 0.1), uv(0.5, 0.2), "
+            "uv(0.9, 0.1)), line(uv(0.9, 0.1), uv(0.1, 0.1))));\nexport f;\n")
+    codes = [d.code for d in _diagnostics(body)]
+    assert "E0510" in codes, codes
+
+
 def test_profile_ending_on_the_axis_is_fine():
     assert _diagnostics("r := revolve(polyline([pt(0, 0, 0), pt(5, 0, 0), pt(5, 4, 0), pt(0, 4, 0)]), axis);\n") == []
 
