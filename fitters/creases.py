@@ -21,6 +21,7 @@ __all__ = ["checked_points", "median_spacing", "linked_components", "crease_mask
 
 
 def checked_points(points) -> np.ndarray:
+    """Points (n, 3) as floats; fewer than 16, or any not finite, are refused with a message."""
     p = np.asarray(points, float)
     if p.ndim != 2 or p.shape[1] != 3 or len(p) < 16:
         raise GeometryError(f"need at least 16 points (n, 3), got an array of shape {p.shape}")
