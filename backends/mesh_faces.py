@@ -142,9 +142,10 @@ def _project_onto(loops, patches, tol):
         return
     xs = [np.concatenate([pieces[k].evaluate(pieces[k].domain[0] + probe * np.ptp(pieces[k].domain)) for k in curves])
           for pieces, _, curves in jobs]
-    # one search for all the loops' curves: they lie on the surface, so the nearest grid node's basin is
-    # nearly always the closest point's; the points not found on the surface get all four starts
-    found = closest_together([patch for _, patch, _ in jobs], xs, grid=32, starts=1)
+    # one search for all the loops' curves: they lie on the surface, so the nearest node of a coarse grid
+    # (16 x 16 and the knots) starts in the closest point's basin nearly always; the points not found on
+    # the surface get four starts from a 32 x 32 grid (the 46-face plate: 52 -> 46 ms to collect its faces)
+    found = closest_together([patch for _, patch, _ in jobs], xs, grid=16, starts=1)
     for (pieces, patch, curves), x, (uv, dist) in zip(jobs, xs, found):
         redo = dist > 1e-9 * float(np.ptp(x, axis=0).max())
         if redo.any():
