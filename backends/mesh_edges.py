@@ -123,14 +123,18 @@ def _sample_pieces(pieces, tol, sides) -> list:
     fine = np.linspace(0, 1, 33)
     spans = [p.breaks for p in pieces]
     probes = xyz_of(pieces, [(b[:-1, None] + np.diff(b)[:, None] * fine[None, :]).ravel() for b in spans])
+    # the sagittas and corners of every piece's spans at once (one call each, not one per piece)
+    pts = np.concatenate(probes).reshape(-1, 33, 3)                               # (all spans, 33, 3)
+    need = np.sqrt(segment_distance(pts[:, 1::2], pts[:, 0:-1:2], pts[:, 2::2]) / limit)   # (all spans, 16)
+    turn = _corners(pts)              # across consecutive spans; those across two pieces are not used
+    first = np.cumsum([0] + [len(b) - 1 for b in spans])
     out = []
-    for b, pts, side in zip(spans, probes, sides):
-        pts = pts.reshape(len(b) - 1, 33, 3)
-        w = np.sqrt(segment_distance(pts[:, 1::2], pts[:, 0:-1:2], pts[:, 2::2]) / limit)   # (spans, 16)
+    for b, lo, hi, side in zip(spans, first[:-1], first[1:], sides):
+        w = need[lo:hi]
         if side:   # equal steps per span, sized by its neediest probe step (as the grid lines are)
             inner = np.concatenate([b[1:-1], _cut(b[:-1], b[1:], np.maximum(1, np.ceil(16 * w.max(axis=1))))])
         else:
-            inner = _equidistributed(b, w, _corners(pts))
+            inner = _equidistributed(b, w, turn[lo:hi - 1])
         out.append(np.unique(np.concatenate([b[[0, -1]], inner])))
     fr = np.array([0.25, 0.5, 0.75])
     active = list(range(len(pieces)))
