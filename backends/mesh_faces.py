@@ -16,7 +16,7 @@ from rgm.errors import BackendError
 from rgm.geometry.power_form import power_form
 
 from .mesh_edges import Piece
-from .mesh_surface import Patch, closest_together, surface_patch
+from .mesh_surface import Patch, closest_together, evaluate_together, surface_patch
 
 
 @dataclass
@@ -106,24 +106,34 @@ def _loop_finish(out, surface, patch, tol) -> list:
     return out
 
 
-def _seams(patch, tol) -> list:
-    """[(axis, lo, hi)] for each parameter direction in which the patch closes up: S(lo, t) = S(hi, t)
-    within `tol` (default 1e-7 x the patch's size) along the whole seam (a full revolution, a closed
-    B-spline surface)."""
+def _seams(patches, tol) -> list:
+    """For each patch, [(axis, lo, hi)] for each parameter direction in which it closes up: S(lo, t) =
+    S(hi, t) within `tol` (default 1e-7 x the patch's size) along the whole seam (a full revolution, a
+    closed B-spline surface); the probes of all patches evaluated together (`evaluate_together`)."""
     t = np.linspace(0.0, 1.0, 9)
-    (u0, u1), (v0, v1) = patch.domain
-    if not tol:
-        uu, vv = np.meshgrid(u0 + t * (u1 - u0), v0 + t * (v1 - v0), indexing="ij")
-        probe = patch.evaluate(uu.ravel(), vv.ravel())
-        tol = 1e-7 * float(np.linalg.norm(probe.max(axis=0) - probe.min(axis=0)))
-    seams = []
-    for axis, (lo, hi), (a, b) in ((0, (u0, u1), (v0, v1)), (1, (v0, v1), (u0, u1))):
-        other = a + t * (b - a)
-        ends = [np.column_stack([np.full(9, x), other])[:, ::1 if axis == 0 else -1] for x in (lo, hi)]
-        gap = np.linalg.norm(patch.evaluate(*ends[0].T) - patch.evaluate(*ends[1].T), axis=1)
-        if gap.max() <= tol:
-            seams.append((axis, lo, hi))
-    return seams
+    probes, limits = [], []
+    for patch in patches:
+        (u0, u1), (v0, v1) = patch.domain
+        limit = tol
+        if not limit:
+            uu, vv = np.meshgrid(u0 + t * (u1 - u0), v0 + t * (v1 - v0), indexing="ij")
+            probe = patch.evaluate(uu.ravel(), vv.ravel())
+            limit = 1e-7 * float(np.linalg.norm(probe.max(axis=0) - probe.min(axis=0)))
+        limits.append(limit)
+        for axis, (lo, hi), (a, b) in ((0, (u0, u1), (v0, v1)), (1, (v0, v1), (u0, u1))):
+            other = a + t * (b - a)
+            probes += [np.column_stack([np.full(9, x), other])[:, ::1 if axis == 0 else -1] for x in (lo, hi)]
+    xyz = evaluate_together([p for p in patches for _ in range(4)], probes)
+    out = []
+    for k, (patch, limit) in enumerate(zip(patches, limits)):
+        (u0, u1), (v0, v1) = patch.domain
+        seams = []
+        for n, (axis, lo, hi) in enumerate(((0, u0, u1), (1, v0, v1))):
+            gap = np.linalg.norm(xyz[4 * k + 2 * n] - xyz[4 * k + 2 * n + 1], axis=1)
+            if gap.max() <= limit:
+                seams.append((axis, lo, hi))
+        out.append(seams)
+    return out
 
 
 def _project_onto(loops, patches, tol):
@@ -146,17 +156,18 @@ def _project_onto(loops, patches, tol):
     # (16 x 16 and the knots) starts in the closest point's basin nearly always; the points not found on
     # the surface get four starts from a 32 x 32 grid (the 46-face plate: 52 -> 46 ms to collect its faces)
     found = closest_together([patch for _, patch, _ in jobs], xs, grid=16, starts=1)
-    for (pieces, patch, curves), x, (uv, dist) in zip(jobs, xs, found):
+    seams = _seams([patch for _, patch, _ in jobs], tol)
+    for (pieces, patch, curves), x, (uv, dist), closes in zip(jobs, xs, found, seams):
         redo = dist > 1e-9 * float(np.ptp(x, axis=0).max())
         if redo.any():
             uv[redo], dist[redo] = patch.closest(x[redo], grid=32)
-        _follow(pieces, patch, curves, x, uv, dist, probe, tol)
+        _follow(pieces, patch, curves, x, uv, dist, probe, closes)
 
 
-def _follow(pieces, patch, curves, x, uv, dist, probe, tol):
+def _follow(pieces, patch, curves, x, uv, dist, probe, seams):
     """The Pieces of `_project_onto` for one loop: its `curves` (indices into pieces), probed at `probe`
-    (points x, closest points uv at distances dist, curve after curve), on the seam sides chosen."""
-    seams = _seams(patch, tol)
+    (points x, closest points uv at distances dist, curve after curve), on the sides of its patch's
+    `seams` (`_seams`) chosen."""
     m = len(probe)
     tables = {k: (uv[i * m:(i + 1) * m], dist[i * m:(i + 1) * m]) for i, k in enumerate(curves)}
     extents = {k: float(np.ptp(x[i * m:(i + 1) * m], axis=0).max()) for i, k in enumerate(curves)}
