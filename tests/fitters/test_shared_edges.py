@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
 
 import rgm
 from rgm.fitters.patches import fit_patches
@@ -198,3 +200,30 @@ def test_a_thin_face_takes_a_shared_edge_that_moves_its_side_but_not_one_that_ru
     edge = top_edge(shape, loop, np.c_[x, dip, np.zeros_like(x)])
     why = rebuild_loop(0, shape, loop, [edge], 0.1 / _surface_speed(shape.fit), reach)
     assert isinstance(why, str) and "from its data loop" in why
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_the_corner_of_three_surfaces_is_where_three_planes_meet(seed):
+    """`_triple_point` (the corner that shared edges run to): for three planes in general position, given
+    as bilinear NURBS over [0, 1]^2 patches containing their common point, the exact solution of the
+    3 x 3 linear system, from a start a few millimetres off."""
+    from rgm.fitters.shared_edges import _triple_point
+    from rgm.geometry import NurbsSurface
+
+    rng = np.random.default_rng(seed)
+    corner = rng.uniform(-50, 50, 3)
+    normals = rng.normal(size=(3, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    assume(abs(np.linalg.det(normals)) > 0.2)             # no two planes nearly parallel
+    planes = []
+    for n in normals:
+        a = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+        a /= np.linalg.norm(a)
+        b = np.cross(n, a)
+        lo = corner - 40 * a - 40 * b + rng.uniform(-5, 5) * a      # the corner inside, not at the centre
+        ctrl = np.array([[lo, lo + 80 * b], [lo + 80 * a, lo + 80 * a + 80 * b]])
+        planes.append(NurbsSurface(1, 1, [0, 0, 1, 1], [0, 0, 1, 1], ctrl))
+    found = _triple_point(planes, corner + rng.uniform(-3, 3, 3), 0.01)
+    exact = np.linalg.solve(normals, np.einsum("ij,j->i", normals, corner))
+    assert found is not None and np.linalg.norm(found - exact) < 1e-9 * 100
