@@ -210,7 +210,7 @@ def _parse_global(text: str, record: str) -> GlobalSection:
     toks = _split_params(text, pdelim, rdelim, lambda: f"Global section ({record})")
     fields = list(g.__dataclass_fields__.values())
     for f, tok in zip(fields[2:], toks[2:]):
-        if not tok.strip():
+        if not tok.strip() and not isinstance(tok, Hollerith):   # a defaulted parameter (`1H ` is a blank string)
             continue
         try:
             value = str(tok) if f.type == "str" else (_to_int(tok) if f.type == "int" else _to_real(tok))

@@ -8,7 +8,7 @@ import struct
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from rgm.backends.iges_format import Entity, GlobalSection, IgesFile, IgesFormatError, format_reals, hollerith
@@ -54,6 +54,7 @@ def _file(params_list, names=()):
 @settings(max_examples=30, deadline=None)
 @given(st.lists(st.lists(st.floats(-1e300, 1e300), min_size=6, max_size=60), min_size=1, max_size=6),
        st.text(alphabet="abcdefghij ,;H0123456789", min_size=0, max_size=150))
+@example(rows=[[0.0] * 6], long_string=" ")   # `1H ` was read as a defaulted parameter (found by explore)
 def test_records_are_80_columns_with_pointers_and_counts(rows, long_string):
     f = IgesFile(GlobalSection(author=long_string))
     for r in rows:
