@@ -646,14 +646,17 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int | None =
         return []
     x = np.vstack([c[2] for c in chosen])
     on = np.repeat([c[0] for c in chosen], [len(c[2]) for c in chosen])
+    # a closed wrap's two faces meet on an iso-line of their one surface, to its round-off: measured to it
+    twin = np.repeat([_twins(patches, i, o) for i, o, _ in chosen], [len(c[2]) for c in chosen])
     gap = np.full(len(x), np.inf)
     for o, q in enumerate(patches):   # one search per face, for every sample near its points
-        near_o = np.flatnonzero(np.isfinite(trees[o].query(x, distance_upper_bound=near, workers=-1)[0]) & (on != o))
+        near_o = np.flatnonzero(np.isfinite(trees[o].query(x, distance_upper_bound=near, workers=-1)[0])
+                                & (on != o) & ~twin)
         if len(near_o):
             gap[near_o] = np.minimum(gap[near_o], written_face(q.shape).distance(x[near_o]))
     seams: dict[tuple[int, int], list[np.ndarray]] = {}
     for (i, o, seam), d in zip(chosen, np.split(gap, np.cumsum([len(c[2]) for c in chosen])[:-1])):
-        if _twins(patches, i, o):   # one surface's iso-line: the faces meet on it, to its round-off
+        if _twins(patches, i, o):
             d = patches[o].shape.distance(seam)
         seams.setdefault((min(i, o), max(i, o)), []).append(d)
     return [Gap(int(i), int(j), float(np.max(np.concatenate(d))), float(np.percentile(np.concatenate(d), 95)),

@@ -67,6 +67,7 @@ not intersected again.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from itertools import combinations
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -339,8 +340,7 @@ def _corner_joins(cands: dict, shapes, tol: float, near: float) -> None:
     meet at the corner instead of each rounding it off on its own data (the stretches end where both
     faces' seam runs do, some point spacings short of it)."""
     pairs = {pair for pair, c in cands.items() if c.curve is None}
-    faces = sorted({f for pair in pairs for f in pair})
-    for a, b, c in ((a, b, c) for a in faces for b in faces for c in faces if a < b < c):
+    for a, b, c in combinations(sorted({f for pair in pairs for f in pair}), 3):
         trio = [(a, b), (b, c), (a, c)]
         if not all(t in pairs for t in trio):
             continue
@@ -358,8 +358,8 @@ def _corner_joins(cands: dict, shapes, tol: float, near: float) -> None:
                 gap = np.linalg.norm(cand.xyz - corner, axis=1)
                 at_corner = int(np.argmin(gap))
                 inward = np.arange(at_corner, cand.hi if end == "lo" else cand.lo, 1 if end == "lo" else -1)
-                clear = inward[gap[inward] >= tol / 4]
-                if len(clear) and (clear[0] < cand.hi if end == "lo" else clear[0] > cand.lo):
+                clear = inward[gap[inward] >= tol / 4]   # inward stops short of the stretch's other end
+                if len(clear):
                     setattr(cand, end, int(clear[0]))
 
 
