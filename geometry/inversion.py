@@ -75,6 +75,27 @@ def _piece_bounds(t, breaks):
     return breaks[idx], hi
 
 
+def _chords(grid, axis):
+    """(s-1,) chord lengths between consecutive rows (axis 0) or columns (axis 1) of an evaluated
+    grid (a, b, 3), the largest across the other direction."""
+    legs = np.linalg.norm(np.diff(grid, axis=axis), axis=-1)
+    return legs.max(axis=1 - axis)
+
+
+def _by_chord(coarse, chords, fine, breaks):
+    """Fine sample parameters: as many as `fine` (the control polygon's adapted samples), half of them
+    as they are and half spread uniformly in the chord length measured on the `coarse` samples, with
+    the domain's ends, its kinks (the interior `breaks`) and their one-sided copies. A rational net's
+    weights can crowd much of the surface into a short stretch of parameter that its control polygon
+    does not show; the chords do, and the stretch gets its share of samples."""
+    length = np.r_[0.0, np.cumsum(chords)]
+    if length[-1] <= 0:
+        return fine
+    spread = np.interp(np.linspace(0.0, length[-1], max(fine.size // 2, 2)), length, coarse)
+    kinks = breaks[1:-1]
+    return np.unique(np.r_[fine[::2], spread, breaks, np.nextafter(kinks, -np.inf)])
+
+
 def _polygon(ctrl, axis):
     """Control polygon leg lengths along `axis` of a net, maximised over the other axes: (n-1,)."""
     legs = np.moveaxis(np.linalg.norm(np.diff(ctrl, axis=axis), axis=-1), axis, 0)
@@ -231,16 +252,18 @@ def closest_point_surface(surface, points):
     """Closest points of `surface` to `points (k, 3)`: (u (k,), v (k,), pts (k, 3), dist (k,)).
 
     Starts: the basins (local minima) of the distance sampled on a coarse geometry-adapted grid,
-    and the local minima among the nearest samples of a fine grid; then the bounded damped Newton iteration, each start
+    and the local minima among the nearest samples of a fine grid, half of whose samples are spread by
+    the coarse grid's chord lengths (`_by_chord`); then the bounded damped Newton iteration, each start
     confined to its smooth patch.
     """
     queries = _queries(points, 3)
-    grids = []
-    for budget in (COARSE, FINE):
-        gu, bu = _samples(surface.knots_u, surface.degree_u, surface.nu, _polygon(surface.ctrl, 0), budget)
-        gv, bv = _samples(surface.knots_v, surface.degree_v, surface.nv, _polygon(surface.ctrl, 1), budget)
-        grids.append((gu, gv, surface.evaluate_grid(gu, gv).reshape(-1, 3)))
-    (cu, cv, coarse), (fu, fv, fine) = grids
+    dirs = ((surface.knots_u, surface.degree_u, surface.nu, _polygon(surface.ctrl, 0)),
+            (surface.knots_v, surface.degree_v, surface.nv, _polygon(surface.ctrl, 1)))
+    (cu, bu), (cv, bv) = (_samples(*d, COARSE) for d in dirs)
+    coarse = surface.evaluate_grid(cu, cv)
+    fu, fv = (_by_chord(t, _chords(coarse, axis), _samples(*dirs[axis], FINE)[0], b)
+              for axis, (t, b) in enumerate(((cu, bu), (cv, bv))))
+    coarse, fine = coarse.reshape(-1, 3), surface.evaluate_grid(fu, fv).reshape(-1, 3)
     basins = _local_minimum_seeds(coarse, (cu.size, cv.size), queries, SEEDS - 2)
     nearest = _nearest_seeds(fine, _grid_neighbours(fu.size, fv.size), queries, SEEDS - basins.shape[1])
     x0 = np.concatenate([np.stack([cu[basins // cv.size], cv[basins % cv.size]], axis=-1),

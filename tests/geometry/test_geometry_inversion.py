@@ -88,3 +88,29 @@ def test_polyline_kinks_and_errors():
     assert np.allclose(pts, [[1, 0.95, 0], [1, 0, 0]], atol=1e-13)
     with pytest.raises(GeometryError, match="query points"):
         line.closest_point(np.zeros((2, 2)))
+
+
+def test_a_minimum_in_a_stretch_the_weights_crowd_is_found():
+    """A rational bilinear 4 x 4 net (weights 0.37-2.87, found by hypothesis) crowds much of the surface
+    into the 0.01 of u past its kink at u = 0.407: the global minimum for this query lies there, in a dip
+    narrower than the control-polygon-adapted fine grid's spacing, and was missed (0.1105 found for a
+    sampled 0.0473). The fine grid spreads half its samples by the coarse grid's chord lengths."""
+    from rgm.geometry import NurbsSurface
+
+    ctrl = [[[0.923314, 0.44958, 0.082454], [-0.446218, -0.678696, 0.939851], [0.032137, -0.768269, 0.24698],
+             [0.553366, 0.226007, 0.834595]],
+            [[-0.920814, 0.057179, -0.081328], [-0.875301, 0.282656, 0.705266], [0.185882, -0.479805, 0.679763],
+             [0.018992, 0.021778, 0.50606]],
+            [[-0.704156, 0.639253, 0.366574], [0.574194, -0.616767, 0.604728], [-0.617352, -0.836895, 0.710454],
+             [0.722567, 0.753074, -0.056181]],
+            [[-0.451903, -0.985816, 0.291442], [0.439819, 0.671138, -0.436244], [-0.569564, 0.278663, 0.61011],
+             [0.927342, -0.69895, -0.035575]]]
+    weights = [[1.681918, 2.866252, 0.689231, 2.861354], [1.141945, 1.442981, 2.534797, 1.404838],
+               [1.783903, 0.37441, 2.334485, 1.752987], [1.190276, 2.428757, 1.118626, 1.524444]]
+    s = NurbsSurface(1, 1, [0, 0, 0.14868, 0.406988, 1, 1], [0, 0, 0.289192, 0.74035, 1, 1], np.array(ctrl),
+                     np.array(weights))
+    query = np.array([[0.24099715796055188, -0.6039116015432322, 0.5159846338690781]])
+    grid = np.linspace(0, 1, 1201)
+    sampled = np.linalg.norm(s.evaluate_grid(grid, grid).reshape(-1, 3) - query, axis=1).min()
+    assert sampled < 0.048
+    assert s.closest_point(query)[3][0] <= sampled + 1e-12
