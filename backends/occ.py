@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rgm.errors import BackendError
+from rgm.errors import BackendError, GeometryError
 
 #: STEP schema option → OpenCASCADE ``write.step.schema`` value.
 SCHEMAS = {"AP214": "AP214IS", "AP203": "AP203", "AP242": "AP242DIS"}
@@ -299,19 +299,7 @@ def _pcurve_pieces(loop, surface, tol):
         prev, nxt = pieces[k - 1], pieces[(k + 1) % len(pieces)]
         if prev[3] is not None or nxt[3] is not None:
             raise BackendError("two intersection pieces in a row in one loop are not supported; put a curve between")
-        a = prev[0].Value(prev[2])
-        b = nxt[0].Value(nxt[1])
-        best = min(branches, key=lambda br: _project2d(br, (a.X(), a.Y()))[0] + _project2d(br, (b.X(), b.Y()))[0])
-        (_, ta), (_, tb) = _project2d(best, (a.X(), a.Y())), _project2d(best, (b.X(), b.Y()))
-        geom = surface_geom(surface)
-        gap = max(geom.Value(p.X(), p.Y()).Distance(geom.Value(q.X(), q.Y()))
-                  for p, q in ((a, best.Value(ta)), (b, best.Value(tb))))
-        if gap > tol:
-            raise BackendError(f"{_label(inter)}: the loop's neighbouring pieces end {gap:.3g} away from the "
-                               f"intersection (more than the tolerance {tol:g}); they must meet it")
-        if ta > tb:
-            best = best.Reversed()
-            ta, tb = best.ReversedParameter(ta), best.ReversedParameter(tb)
+        best, ta, tb = _stretch_between(inter, branches, surface, prev[0].Value(prev[2]), nxt[0].Value(nxt[1]), tol)
         # the neighbours end where this piece's approximation starts and ends (they met it within the
         # tolerance, but a wire closes at PRECISION): their last / first point moved onto it
         if k == 0:
@@ -324,6 +312,42 @@ def _pcurve_pieces(loop, surface, tol):
             out[0] = _moved_end(out[0], best.Value(tb), False)
         out.append((Geom2d_TrimmedCurve(best, ta, tb), ta, tb))
     return _snapped_joins(out)
+
+
+def _stretch_between(inter, branches, surface, a, b, tol):
+    """(Geom2d curve, ta, tb), ta < tb: the stretch of the lazy intersection `inter` on `surface` from the
+    2-D point `a` (the loop's previous piece's end) to `b` (the next one's start). OpenCASCADE's branch
+    (`branches`, its pcurves on `surface`) passing nearest both is taken if it passes within `tol` (mm) of
+    both; where the surfaces meet at a small angle GeomInt_IntSS can break one curve into fragments none of
+    which reaches both (a fitted mustard bottle's shoulder: 5.5 mm), and rgm's own marched intersection
+    (`IntersectionCurve.stretch`) at tol / 10 is taken instead. Neither within `tol`: an error."""
+    geom = surface_geom(surface)
+
+    def gap(curve, ta, tb):
+        return max(geom.Value(p.X(), p.Y()).Distance(geom.Value(q.X(), q.Y()))
+                   for p, q in ((a, curve.Value(ta)), (b, curve.Value(tb))))
+
+    best = min(branches, key=lambda br: _project2d(br, (a.X(), a.Y()))[0] + _project2d(br, (b.X(), b.Y()))[0])
+    (_, ta), (_, tb) = _project2d(best, (a.X(), a.Y())), _project2d(best, (b.X(), b.Y()))
+    miss = gap(best, ta, tb)
+    if miss > tol:
+        from rgm.model import BSplineCurve
+
+        ends = [np.array([p.X(), p.Y(), p.Z()]) for p in (geom.Value(a.X(), a.Y()), geom.Value(b.X(), b.Y()))]
+        try:
+            uv, _ = inter.stretch(surface, ends[0], ends[1], tol / 10)
+        except GeometryError:
+            uv = None
+        if uv is not None:
+            [(best, ta, tb)] = _geom2d_pieces(BSplineCurve(uv))
+        own = np.inf if uv is None else gap(best, ta, tb)
+        if own > tol:
+            raise BackendError(f"{_label(inter)}: the loop's neighbouring pieces end {min(miss, own):.3g} away "
+                               f"from the intersection (more than the tolerance {tol:g}); they must meet it")
+    if ta > tb:
+        best = best.Reversed()
+        ta, tb = best.ReversedParameter(ta), best.ReversedParameter(tb)
+    return best, ta, tb
 
 
 def _snapped_joins(pieces, gap: float = 1e-6):

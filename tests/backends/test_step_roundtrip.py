@@ -279,3 +279,39 @@ def test_a_trim_across_a_densely_knotted_surface_keeps_its_edges_at_the_precisio
     face = TrimmedFace(BSplineSurface(nurbs), Loop((Circle([0.5, 0.5], [0, 0, 1], 0.45),)), (), name="skin")
     model = Model("mm", 0.01, {"skin": face}, ("skin",))
     check_roundtrip(model, tmp_path / "dense.step")
+
+
+def test_an_intersection_opencascade_breaks_into_fragments_takes_rgms_own(tmp_path, monkeypatch):
+    """Where GeomInt_IntSS breaks one intersection curve into fragments none of which reaches both of a
+    loop's neighbouring pieces (surfaces meeting at a small angle: a fitted mustard bottle's shoulder
+    missed by 5.5 mm), the face takes rgm's own marched intersection instead, and the file still
+    verifies; with only OpenCASCADE's fragment it would be refused."""
+    import rgm
+    from OCP.Geom import Geom_TrimmedCurve
+    from rgm.errors import GeometryError
+    from rgm.model import IntersectionCurve
+    from OCP.Geom2d import Geom2d_TrimmedCurve
+
+    model = rgm.load("examples/hand.rgm")
+    real = occ._occ_intersection
+
+    def fragments(curve):   # each branch cut to its first third
+        out = []
+        for c3, p1, p2 in real(curve):
+            t0, t1 = c3.FirstParameter(), c3.LastParameter()
+            cut = t0 + (t1 - t0) / 3
+            out.append((Geom_TrimmedCurve(c3, t0, cut), Geom2d_TrimmedCurve(p1, t0, cut),
+                        Geom2d_TrimmedCurve(p2, t0, cut)))
+        return out
+
+    monkeypatch.setattr(occ, "_occ_intersection", fragments)
+    occ.write_step(model, tmp_path / "hand.step", verify=True)
+    back = occ.read_step(tmp_path / "hand.step")
+    assert occ.is_valid(back) and len(occ.faces_of(back)) == 1
+    def no_stretch(*args, **kwargs):
+        raise GeometryError("no stretch")
+
+    monkeypatch.setattr(IntersectionCurve, "stretch", no_stretch)
+    with pytest.raises(BackendError, match="away from the intersection"):
+        occ.write_step(model, tmp_path / "refused.step")
+    assert not (tmp_path / "refused.step").exists()
