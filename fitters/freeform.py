@@ -62,7 +62,8 @@ def _split_candidates(x, res, knots, degree, tol, min_count, greed=0.5):
     residual exceeds both `tol` and `greed` times the worst of all and that hold at least 2 `min_count`
     of the data parameters `x` (so that each half keeps about `min_count`: a net finer than the data
     would interpolate the samples and their noise). Splitting only the worst spans each round (a
-    least-squares error spreads over neighbouring spans) avoids over-refining."""
+    least-squares error spreads over neighbouring spans) avoids over-refining. When every span over
+    `tol` is too narrow, the splittable spans beside them are split instead (`_beside_narrow`)."""
     idx, breaks = _span_index(x, knots, degree)
     worst = np.zeros(len(breaks) - 1)
     np.maximum.at(worst, idx, res)
@@ -70,8 +71,28 @@ def _split_candidates(x, res, knots, degree, tol, min_count, greed=0.5):
     if not splittable.any():
         return np.zeros(0), np.zeros(0)
     bad = np.nonzero((worst > max(tol, greed * worst[splittable].max())) & splittable)[0]
+    if not len(bad):
+        bad = _beside_narrow(worst, splittable, tol, degree)
     bad = bad[np.argsort(-worst[bad], kind="stable")]
     return 0.5 * (breaks[bad] + breaks[bad + 1]), worst[bad]
+
+
+def _beside_narrow(worst, splittable, tol, degree):
+    """Spans to split when every span over `tol` is too narrow to split: the nearest splittable span
+    on each side of each of them, if it lies within `degree` spans (the B-splines over a span reach
+    that far: a knot inserted there adds one that overlaps the narrow span and relieves it). The
+    returned spans' `worst` is raised to the narrow span's, so they are ranked by what they relieve."""
+    narrow = np.flatnonzero((worst > tol) & ~splittable)
+    ok = np.flatnonzero(splittable)
+    if not len(narrow) or not len(ok):
+        return np.zeros(0, int)
+    at = np.searchsorted(ok, narrow)
+    left, right = ok[np.clip(at - 1, 0, len(ok) - 1)], ok[np.clip(at, 0, len(ok) - 1)]
+    use_l, use_r = (at > 0) & (narrow - left <= degree), (at < len(ok)) & (right - narrow <= degree)
+    picked = np.r_[left[use_l], right[use_r]]
+    score = np.r_[worst[narrow[use_l]], worst[narrow[use_r]]]
+    np.maximum.at(worst, picked, score)
+    return np.unique(picked)
 
 
 # --------------------------------------------------------------------------------------------- results

@@ -237,7 +237,7 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
     closed_u: scattered data only: u is an angle round a closed wrap, u = 0 and u = 1 the same points; every
         net is closed C1 across them (`rgm.fitters.freeform.closure_u`), knot insertion keeping it so.
     Refinement stops when the statistic is met; when every span that exceeds the tolerance holds fewer
-    than 2 `min_lines` data lines, or the net would exceed one control point per `data_per_ctrl` data
+    than 2 `min_lines` data lines, and so do the spans within `degree` of it, or the net would exceed one control point per `data_per_ctrl` data
     points (see the module docstring); or when the net would exceed `max_ctrl` (the last step then
     inserts the worst of its knots that stay within the limit).
     `SurfaceFit.stopped` says which, and `stats.holds` is False then. Once the tolerance holds, the last
@@ -291,8 +291,8 @@ def _refine(prob, tol, n_initial, max_ctrl, statistic, prune, min_lines, data_pe
                 _split_candidates(pv, wv, kv, degree, tol, lines, greed))
         new_u, new_v = step[0][0], step[1][0]
         if len(new_u) + len(new_v) == 0:
-            stopped = (f"approximation limit reached: every knot span whose error exceeds the tolerance holds "
-                       f"fewer than {2 * min_lines:g} data lines, and a finer net would interpolate the samples "
+            stopped = (f"approximation limit reached: every knot span whose error exceeds the tolerance, and "
+                       f"every span beside it, holds fewer than {2 * min_lines:g} data lines, and a finer net would interpolate the samples "
                        f"and their noise")
             break
         cap = min(max_ctrl, limit)

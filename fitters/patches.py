@@ -100,6 +100,7 @@ _WITHIN = ("refitted through a common boundary curve with its neighbour: the sep
 _ANCHOR_TOL = 0.25      # anchors are met within this share of the seam tolerance (`seam_anchors`)
 _ROUNDS = 3              # anchored refit rounds at most (`_share_and_refit`)
 _RESPLIT = 2             # a piece no surface fits is split in halves at most this deep (`_fit_piece`)
+_DENSE = 8               # a fit with a control point per fewer data points than this tries halves too (`_fit_piece`)
 
 
 # ---------------------------------------------------------------------------------------- fitting
@@ -196,9 +197,11 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
 def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, skipped, depth=_RESPLIT) -> list:
     """The PatchFits of one piece of a patch (`fit_patches`), parameterised by `uv` (u, v) over `base`:
     one, or, where no surface over those parameters meets `tol` within the limits of `fit_freeform` (the
-    projection folds, or the piece spans faces that a crease too soft to find divides), the fits of its
+    projection folds, or the piece spans faces that a crease too soft to find divides) or meets it only
+    with a control point per fewer than `_DENSE` data points (the projection is steep), the fits of its
     two halves across its longest extent, each parameterised again, to `depth` splits, kept only if
-    every one of them holds. Pieces under 16 points are left out, fits that fail said in `skipped`."""
+    every one of them holds (and, for a fit that held, with fewer control points in all). Pieces under
+    16 points are left out, fits that fail said in `skipped`."""
     if len(indices) < 16:
         return []
     if base.closed:
@@ -209,7 +212,9 @@ def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, 
     except GeometryError as exc:     # a sliver no surface or trim can be fitted to: said, not hidden
         skipped.append(f"{len(indices)} points not fitted: {exc}")
         return []
-    if fit.shape.fit.stats.holds or depth == 0 or len(indices) < 64:
+    whole = fit.shape.fit
+    dense = whole.n_ctrl * _DENSE > len(indices)
+    if (whole.stats.holds and not dense) or depth == 0 or len(indices) < 64:
         return [fit]
     x = points[indices] - points[indices].mean(axis=0)
     along = x @ np.linalg.svd(x, full_matrices=False)[2][0]
@@ -218,9 +223,12 @@ def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, 
         own = pca_normals(points[half], k)[0]
         for sub, u, v, b in base_parameters(points[half], own, spacing=spacing, depth=1):
             halves += _fit_piece(points, half[sub], b, (u, v), tol, statistic, max_ctrl, k, spacing, notes, depth - 1)
-    if halves and all(h.shape.fit.stats.holds for h in halves):
+    if halves and all(h.shape.fit.stats.holds for h in halves) and \
+            (not whole.stats.holds or sum(h.shape.fit.n_ctrl for h in halves) < whole.n_ctrl):
+        why = (f"met the tolerance only with {whole.n_ctrl} control points" if whole.stats.holds else
+               f"met the tolerance ({whole.stopped})")
         skipped += notes + [f"{len(indices)} points split in {len(halves)} patches: no surface over one "
-                            f"parameterisation met the tolerance ({fit.shape.fit.stopped})"]
+                            f"parameterisation {why}"]
         return halves
     return [fit]
 

@@ -1,7 +1,7 @@
 """Free-form fitting by knot insertion (issue 8): tolerance met, error never rises, adaptive beats uniform."""
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from rgm.errors import GeometryError
@@ -62,6 +62,7 @@ def test_surface_meets_tolerance_and_error_never_rises(seed):
 
 @settings(max_examples=5, deadline=None)
 @given(seed=st.integers(0, 10_000))
+@example(seed=5107)   # failing spans too narrow to split: the refinement splits the spans beside them
 def test_adaptive_net_is_smaller_than_the_smallest_uniform_net_that_meets_tol(seed):
     grid = smooth_grid(seed, noise=0.01)
     tol = 0.08

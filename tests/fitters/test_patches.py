@@ -238,9 +238,9 @@ def test_an_open_wrap_is_one_patch_parameterised_by_its_angle():
 
 def test_a_piece_no_surface_fits_over_its_projection_is_split_and_its_halves_hold():
     """A half cylinder (r 20 mm, 40 mm long) parameterised by projection onto its base plane: its slope
-    runs to infinity at the plane, and the fit over that projection stops at the approximation limit with
-    the tolerance unmet (950 control points). The piece is split across its longest extent and each half
-    parameterised again: both hold with about 30 control points. (On the YCB meat can, seeds 2-4 of the
+    runs to infinity at the plane, and the fit over that projection meets the tolerance only with a
+    control point per fewer than 4 data points (840 for 3000), if at all. The piece is split across its
+    longest extent and each half parameterised again: both hold with about 30 control points. (On the YCB meat can, seeds 2-4 of the
     views, pieces of the lid's corner projected onto a cylinder failed so before; with the split every patch
     holds and 29-33 seams are within 1 mm, 20-24 before.)"""
     from rgm.fitters.patch_base import Base, reach_past, unit_box
@@ -251,7 +251,7 @@ def test_a_piece_no_surface_fits_over_its_projection_is_split_and_its_halves_hol
     p = np.c_[20 * np.cos(t), y, 20 * np.sin(t)] + rng.normal(0, 0.01, (3000, 3))
     idx, uv = np.arange(len(p)), unit_box(p[:, :2])
     one = _fit_patch(p, idx, Base("plane", 0.0), reach_past(p, *uv, 3.5), 0.05, "max", 4000)
-    assert not one.shape.fit.stats.holds and "approximation limit" in one.shape.fit.stopped
+    assert one.shape.fit.n_ctrl * 4 > len(p)
     notes = []
     halves = _fit_piece(p, idx, Base("plane", 0.0), uv, 0.05, "max", 4000, 16, 0.7, notes)
     assert len(halves) >= 2 and all(h.shape.fit.stats.holds for h in halves)
