@@ -20,7 +20,7 @@ from rgm.fitters.freeform import SurfaceFit, design_matrix, grid_parameters, pla
 from rgm.fitters.freeform_surface import fit_surface
 from rgm.fitters.trimloops import TrimLoops, fit_trim_loops
 
-__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set", "printed_surface"]
+__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set", "printed_surface", "retrimmed"]
 
 _DEC = 4   # decimals of model-space numbers (mm): 0.1 micrometre
 _UV_DEC = 9
@@ -157,6 +157,30 @@ def _surface_speed(fit: SurfaceFit) -> float:
     return float(max(du, dv, 1e-12))
 
 
+def _bins(n: int) -> int:
+    """Cells a side of the raster that scattered data of n points are trimmed on (`_occupancy`)."""
+    return int(np.clip(np.sqrt(n) / 2, 24, 256))
+
+
+def retrimmed(shape: FreeformShape, points: np.ndarray, params, tol: float, statistic: str,
+              cover: np.ndarray) -> FreeformShape:
+    """`shape`, fitted by `fit_freeform` to scattered `points` over `params`, trimmed again to its data
+    and the surface parameters `cover` (k, 2) with the band between each and its nearest data parameter
+    (so the region stays one): its surface is unchanged. (`rgm.fitters.seam_cover`.)"""
+    from scipy.spatial import cKDTree
+
+    margin = 0.5 / _bins(len(points))
+    u, v = (_inset(np.asarray(t, float), margin) for t in params)
+    data = np.c_[u, v]
+    _, j = cKDTree(data).query(cover)
+    gap = data[j] - cover
+    n = np.maximum(1, np.ceil(np.linalg.norm(gap, axis=1) / margin)).astype(int)
+    t = np.concatenate([np.arange(k) / k for k in n])
+    band = np.repeat(cover, n, axis=0) + t[:, None] * np.repeat(gap, n, axis=0)
+    return fit_freeform(points, tol, statistic=statistic, cuts=False, params=(u, v), surface=shape.fit,
+                        cover=band)
+
+
 def _inset(t: np.ndarray, margin: float) -> np.ndarray:
     """Parameters in [0, 1] moved into [margin, 1 - margin]: the surface reaches a little beyond its data,
     so trimming loops (and a cut's intersection with them) lie strictly inside its domain."""
@@ -187,7 +211,7 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
         region, rows, cols, snap = mask, ug, vg, None
         spacing = float(np.median(np.linalg.norm(np.diff(grid, axis=1), axis=2)[mask[:, 1:] & mask[:, :-1]]))
     else:
-        bins = int(np.clip(np.sqrt(len(points)) / 2, 24, 256))
+        bins = _bins(len(points))
         if surface is None:
             u, v = (_inset(np.asarray(t, float), 0.5 / bins)
                     for t in (plane_parameters(points)[:2] if params is None else params))
@@ -196,7 +220,8 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
             (u, v), fit = map(np.asarray, params), surface
         region = _occupancy(u, v, bins) if cover is None else _occupancy(*np.r_[np.c_[u, v], cover].T, bins)
         rows = cols = (np.arange(bins) + 0.5) / bins
-        snap = np.c_[u, v]
+        # a cover counts as data for the snapping, unless a band holds the loops (a wrap's cover lies past it)
+        snap = np.c_[u, v] if cover is None or band is not None else np.r_[np.c_[u, v], cover]
         from scipy.spatial import cKDTree
 
         spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))
