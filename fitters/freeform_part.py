@@ -20,7 +20,7 @@ from rgm.fitters.freeform import SurfaceFit, design_matrix, grid_parameters, pla
 from rgm.fitters.freeform_surface import fit_surface
 from rgm.fitters.trimloops import TrimLoops, fit_trim_loops
 
-__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set", "printed_surface", "retrimmed"]
+__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set", "printed_surface", "retrimmed", "fitted_parameters"]
 
 _DEC = 4   # decimals of model-space numbers (mm): 0.1 micrometre
 _UV_DEC = 9
@@ -162,6 +162,13 @@ def _bins(n: int) -> int:
     return int(np.clip(np.sqrt(n) / 2, 24, 256))
 
 
+def fitted_parameters(params, n: int) -> np.ndarray:
+    """(n, 2) the surface parameters `fit_freeform` fits n scattered points at, given their `params` (u, v)
+    in [0, 1]: inset by half a trimming raster cell (`_inset`)."""
+    margin = 0.5 / _bins(n)
+    return np.c_[[_inset(np.asarray(t, float), margin) for t in params]].T
+
+
 def retrimmed(shape: FreeformShape, points: np.ndarray, params, tol: float, statistic: str,
               cover: np.ndarray) -> FreeformShape:
     """`shape`, fitted by `fit_freeform` to scattered `points` over `params`, trimmed again to its data
@@ -170,15 +177,19 @@ def retrimmed(shape: FreeformShape, points: np.ndarray, params, tol: float, stat
     from scipy.spatial import cKDTree
 
     margin = 0.5 / _bins(len(points))
-    u, v = (_inset(np.asarray(t, float), margin) for t in params)
-    data = np.c_[u, v]
-    _, j = cKDTree(data).query(cover)
-    gap = data[j] - cover
-    n = np.maximum(1, np.ceil(np.linalg.norm(gap, axis=1) / margin)).astype(int)
-    t = np.concatenate([np.arange(k) / k for k in n])
-    band = np.repeat(cover, n, axis=0) + t[:, None] * np.repeat(gap, n, axis=0)
+    data = fitted_parameters(params, len(points))
+    u, v = data.T
+    band = band_samples(cover, data[cKDTree(data).query(cover)[1]], margin)
     return fit_freeform(points, tol, statistic=statistic, cuts=False, params=(u, v), surface=shape.fit,
                         cover=band)
+
+
+def band_samples(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
+    """Points every `step` or closer on the segments from a[i] to b[i] (k, 2), b[i] left out: the cells
+    a trim must cover to reach from b to a in one region."""
+    n = np.maximum(1, np.ceil(np.linalg.norm(b - a, axis=1) / step)).astype(int)
+    t = np.concatenate([np.arange(k) / k for k in n])
+    return np.repeat(a, n, axis=0) + t[:, None] * np.repeat(b - a, n, axis=0)
 
 
 def _inset(t: np.ndarray, margin: float) -> np.ndarray:

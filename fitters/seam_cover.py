@@ -13,12 +13,16 @@ certificates stand; a grown trim is kept only when the seams it touches score be
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rgm.errors import GeometryError
+from rgm.fitters.freeform import design_matrix
 from rgm.geometry.inversion import closest_point_surface
 
-__all__ = ["cover_seams"]
+__all__ = ["cover_seams", "grown_outline"]
 
 
 def _feet(shape_b, xyz, tol: float) -> np.ndarray:
@@ -36,8 +40,8 @@ def cover_seams(points, patches, gaps, tol: float, near: float, retrim, measure,
     docstring), and their gaps. `retrim(patch, feet)` -> the patch trimmed to its data and the
     surface parameters `feet` (k, 2) (`rgm.fitters.freeform_part.retrimmed`), or None if no valid trim
     results; `measure(patches)` -> gaps;
-    `score(gaps)` orders sets of seams. Each seam is tried both ways (the face of fewer points grown
-    first); a grown face is kept only if its seams then score better."""
+    `score(gaps)` orders sets of seams. Each seam is tried both ways, the worst seam first; a grown face
+    is kept only if its seams then score better, the better way of the two if both do."""
     from rgm.fitters.patches import _twins, boundary_samples
 
     patches = list(patches)
@@ -48,23 +52,123 @@ def cover_seams(points, patches, gaps, tol: float, near: float, retrim, measure,
         current = {(h.i, h.j): h for h in gaps}.get((g.i, g.j))
         if current is None or current.max <= tol:
             continue
-        order = sorted((g.i, g.j), key=lambda k: len(patches[k].indices))
-        for b in order:
+        best = None
+        for b in (g.i, g.j):
             a = g.i + g.j - b
-            if patches[b].shape.outline is not None:   # its loop has shared edges: not re-trimmed
-                continue
             xyz, shared = boundary_samples(patches[a].shape, step)
             d = cKDTree(points[patches[b].indices]).query(xyz, distance_upper_bound=2 * near)[0]
             feet = _feet(patches[b].shape, xyz[np.isfinite(d) & (shared < 0)], tol)
-            if not len(feet):
-                continue
-            grown = retrim(patches[b], feet)
+            grown = retrim(patches[b], feet) if len(feet) else None
             if grown is None:
                 continue
             trial = patches[:b] + [grown] + patches[b + 1:]
             new = measure(trial)
-            touched = lambda gs: [h for h in gs if b in (h.i, h.j)]   # noqa: E731
-            if score(touched(new)) > score(touched(gaps)):
-                patches, gaps = trial, new
-                break
+            touched = [h for h in new if b in (h.i, h.j)], [h for h in gaps if b in (h.i, h.j)]
+            if score(touched[0]) > score(touched[1]) and (best is None or score(new) > score(best[1])):
+                best = trial, new
+        if best is not None:
+            patches, gaps = best
     return patches, gaps
+
+
+def grown_outline(shape, feet: np.ndarray, data_uv: np.ndarray, tol: float):
+    """`shape`, whose outer loop has shared edges (`FreeformShape.outline`: the shared arcs and the data
+    stretches between them), grown over `feet` (k, 2; surface parameters). The face's region (inside the
+    outer loop, outside its holes) is rasterised as its trim was (`rgm.fitters.freeform_part`) with the
+    band from each foot to the loop that bounds it there: the nearest data stretch for a foot outside the
+    outer loop (one past the end of a shared edge, at a corner, goes to the stretch beyond the join), the
+    hole for a foot inside a hole. Its contour, snapped to `data_uv` and the band, re-makes each data
+    stretch that feet go to, from the join where the stretch starts to the one where it ends (the shared
+    edges stay as they are), and each hole that feet lie in. None where nothing grows or no valid loop
+    results."""
+    from rgm.fitters.freeform_part import _bins, _occupancy, _surface_speed, band_samples
+    from rgm.fitters.patches import _written_loops
+    from rgm.fitters.shared_edges import SharedEdge
+    from rgm.fitters.trimloops import fit_open_chain, fit_trim_loops, loop_samples, polygon_problems, signed_area
+    from rgm.geometry.polygon import inside_polygons
+
+    outline, shared = shape.outline, shape.outline_shared
+    start = np.flatnonzero(shared != np.roll(shared, 1))
+    if len(start) < 2 or start[0] != 0:
+        return None
+    runs = list(zip(start, np.r_[start[1:], len(outline)]))
+    blocks = []                      # the outer pieces by run: a shared edge, or the data pieces between two
+    for piece in shape.outer:
+        if isinstance(piece, SharedEdge) or not blocks or isinstance(blocks[-1][0], SharedEdge):
+            blocks.append([piece])
+        else:
+            blocks[-1].append(piece)
+    if len(blocks) != len(runs) or any(isinstance(b[0], SharedEdge) != (shared[s] >= 0)
+                                       for b, (s, _) in zip(blocks, runs)):
+        return None
+    holes = _written_loops(shape)[0][1:]
+    outside = ~inside_polygons(feet, [outline])
+    hole_of = np.full(len(feet), -1)
+    for h, hole in enumerate(holes):
+        hole_of[~outside & inside_polygons(feet, [hole])] = h
+    free = np.flatnonzero(shared < 0)
+    nearest = np.full(len(feet), -1)
+    ends = feet.copy()
+    if outside.any():
+        nearest[outside] = free[cKDTree(outline[free]).query(feet[outside])[1]]
+        ends[outside] = outline[nearest[outside]]
+    for h in np.unique(hole_of[hole_of >= 0]):
+        ends[hole_of == h] = holes[h][cKDTree(holes[h]).query(feet[hole_of == h])[1]]
+    grow = {r for r, (s, e) in enumerate(runs) if shared[s] < 0 and np.any((nearest >= s) & (nearest < e))}
+    refill = set(np.unique(hole_of[hole_of >= 0]).tolist())
+    if not grow and not refill:
+        return None
+    bins = _bins(len(data_uv))
+    step = 0.5 / bins
+    use = outside | (hole_of >= 0)
+    band = band_samples(feet[use], ends[use], step)
+    centres = (np.arange(bins) + 0.5) / bins
+    cells = np.c_[np.repeat(centres, bins), np.tile(centres, bins)]
+    inside = inside_polygons(cells, [outline]) & ~inside_polygons(cells, holes) if holes else \
+        inside_polygons(cells, [outline])
+    region = inside.reshape(bins, bins) | _occupancy(*band.T, bins)
+    tol_uv = tol / _surface_speed(shape.fit)
+    try:
+        grown = fit_trim_loops(region, centres, centres, tol_uv, snap_to=np.r_[data_uv, band], domain=((0, 1), (0, 1)))
+    except GeometryError:
+        return None
+    ring = loop_samples(grown.outer)[0]
+    tree = cKDTree(ring)
+    outer, poly, flags = [], [], []
+    for r, ((s, e), block) in enumerate(zip(runs, blocks)):
+        if r not in grow:
+            outer += block
+            poly.append(outline[s:e])
+            flags.append(shared[s:e])
+            continue
+        j1, j2 = outline[s], outline[e - 1]
+        i1, i2 = tree.query(j1)[1], tree.query(j2)[1]
+        path = ring[(i1 + np.arange((i2 - i1) % len(ring) + 1)) % len(ring)]
+        chain = np.vstack([j1, path[1:-1], j2])
+        chain = chain[np.r_[True, np.linalg.norm(np.diff(chain, axis=0), axis=1) > 1e-12]]
+        if len(chain) < 2:
+            return None
+        try:
+            pieces = fit_open_chain(chain, tol_uv)
+        except GeometryError:
+            return None
+        pieces = [replace(p, ctrl=np.clip(p.ctrl, 0.0, 1.0)) for p in pieces]
+        outer += pieces
+        dense = np.vstack([design_matrix(np.linspace(0, 1, 64 * len(p.ctrl)), p.knots, p.degree) @ p.ctrl
+                           for p in pieces])
+        poly.append(dense)
+        flags.append(np.full(len(dense), -1))
+    new_outline, new_flags = np.vstack(poly), np.concatenate(flags)
+    keep = np.r_[True, np.any(np.diff(new_outline, axis=0) != 0, axis=1)]   # no vertex repeated
+    keep[-1] &= np.any(new_outline[-1] != new_outline[0])                  # nor the first at the end
+    new_outline, new_flags = new_outline[keep], new_flags[keep]
+    # the holes feet lie in are replaced by the grown region's holes inside them; the others kept
+    new_holes = [list(hole) for h, hole in enumerate(shape.holes) if h not in refill]
+    for hole in grown.holes:
+        first = loop_samples(hole)[0][:1]
+        if any(inside_polygons(first, [holes[h]])[0] for h in refill):
+            new_holes.append(list(hole))
+    polys = [new_outline] + [loop_samples(tuple(h))[0] for h in new_holes]
+    if signed_area(new_outline) <= 0 or polygon_problems(polys):
+        return None
+    return replace(shape, outer=outer, holes=new_holes, outline=new_outline, outline_shared=new_flags)

@@ -303,6 +303,12 @@ def loop_samples(loop: tuple[CurveFit, ...], per_ctrl: int = 16, min_per_piece: 
     return (pts[keep], owner[keep]) if keep.any() else (pts[:1], owner[:1])
 
 
+def polygon_problems(polys) -> list[str]:
+    """What is wrong with closed polygons polys[0] (the outer boundary) and polys[1:] (its holes) as
+    trimming loops (`_loop_problems`, in words). Empty: valid."""
+    return _loop_problems(polys)[1]
+
+
 def check_loops(outer: tuple[CurveFit, ...], holes=()) -> list[str]:
     """What is wrong with fitted trimming loops (dense samples of each): a loop crossing or touching
     itself, two loops crossing, a hole outside the outer boundary or inside another. Empty: valid."""

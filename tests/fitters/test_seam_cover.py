@@ -80,3 +80,64 @@ def test_a_gap_the_surfaces_do_not_close_is_left_as_measured():
     grown, after = _covered(points, patches, gaps, tol, "p95", 5 * spacing)
     assert after[0].max > tol
     assert after[0].max >= 0.9 * gaps[0].max or all(g.shape is p.shape for g, p in zip(grown, patches))
+
+
+def _square_face(hole=False):
+    """A plane 40 x 40 mm fitted over [0.2, 0.8]² of its parameters (so it reaches past its data), its
+    outer loop the square [0.2, 0.8]² with the side v = 0.2 shared with patch 7 (`FreeformShape.outline`)
+    and the other three sides one data stretch; with `hole`, a hole [0.4, 0.6]² (clockwise)."""
+    from rgm.fitters.freeform_part import FreeformShape
+    from rgm.fitters.freeform_surface import fit_surface
+    from rgm.fitters.shared_edges import SharedEdge
+    from rgm.fitters.trimloops import TrimLoops, fit_closed_loop, fit_open_chain
+
+    rng = np.random.default_rng(3)
+    uv = rng.uniform(0.2, 0.8, (2000, 2))
+    pts = np.c_[(uv - 0.2) * 40 / 0.6, np.zeros(len(uv))]
+    fit = fit_surface(pts, 0.1, params=(uv[:, 0], uv[:, 1]))
+    side = np.linspace(0.2, 0.8, 61)
+    shared_arc = np.c_[side, np.full(61, 0.2)]
+    rest = np.vstack([np.c_[np.full(60, 0.8), side[1:]], np.c_[side[::-1][1:], np.full(60, 0.8)],
+                      np.c_[np.full(60, 0.2), side[::-1][1:]]])
+    data_pieces = list(fit_open_chain(rest, 1e-4))
+    outline = np.vstack([shared_arc, rest])
+    flags = np.r_[np.full(61, 7), np.full(len(rest), -1)]
+    h = np.linspace(0.4, 0.6, 21)
+    holes = [list(fit_closed_loop(np.vstack([np.c_[h, np.full(21, 0.4)], np.c_[np.full(20, 0.6), h[1:]],
+                                             np.c_[h[::-1][1:], np.full(20, 0.6)], np.c_[np.full(19, 0.4), h[::-1][1:-1]]])[::-1], 1e-4))] if hole else []
+    loops = TrimLoops(tuple(fit_closed_loop(outline, 1e-4)), tuple(tuple(x) for x in holes), 0)
+    shape = FreeformShape(fit, loops, [SharedEdge(7, (0, 7))] + data_pieces, holes, outline, flags)
+    return shape, uv
+
+
+def test_a_face_with_a_shared_edge_grows_its_data_stretch_and_keeps_the_edge():
+    from rgm.fitters.seam_cover import grown_outline
+    from rgm.fitters.shared_edges import SharedEdge
+    from rgm.geometry.polygon import inside_polygons
+
+    shape, uv = _square_face()
+    feet = np.c_[np.full(20, 0.86), np.linspace(0.35, 0.65, 20)]     # past the side u = 0.8
+    grown = grown_outline(shape, feet, uv, 0.1)
+    assert grown is not None and grown.fit is shape.fit
+    # every foot is inside the grown loop or on it (its contour is snapped to the feet: the grown edge
+    # runs through them), none was inside before
+    on = cKDTree(grown.outline).query(feet)[0] < 0.01
+    assert (inside_polygons(feet, [grown.outline]) | on).all() and not inside_polygons(feet, [shape.outline]).any()
+    # the shared edge is the same piece and the same arc, at the start of the loop
+    assert isinstance(grown.outer[0], SharedEdge) and grown.outer[0] == shape.outer[0]
+    assert np.array_equal(grown.outline[grown.outline_shared == 7], shape.outline[:61])
+    # the rest of the square is where it was (the grown stretch keeps to the data elsewhere)
+    o = grown.outline
+    top = o[(o[:, 1] > 0.7) & (o[:, 0] > 0.3) & (o[:, 0] < 0.7)]
+    left = o[(o[:, 0] < 0.3) & (o[:, 1] > 0.3) & (o[:, 1] < 0.7)]
+    assert np.abs(top[:, 1] - 0.8).max() < 0.03 and np.abs(left[:, 0] - 0.2).max() < 0.03
+    # feet inside the face grow nothing; feet in a hole shrink it
+    assert grown_outline(shape, np.array([[0.5, 0.5]]), uv, 0.1) is None
+    holed, uv = _square_face(hole=True)
+    inner = np.c_[np.full(10, 0.43), np.linspace(0.42, 0.58, 10)]
+    filled = grown_outline(holed, inner, uv, 0.1)
+    assert filled is not None
+    from rgm.fitters.trimloops import loop_samples
+    holes = [loop_samples(tuple(h))[0] for h in filled.holes]
+    assert not any(inside_polygons(inner, [h]).any() for h in holes)
+    assert np.array_equal(filled.outline, holed.outline[:-1])   # as it was (its closing vertex not repeated)
