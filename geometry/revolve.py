@@ -49,14 +49,17 @@ def revolution_surface(profile: NurbsCurve, axis_point, axis_dir, start: float =
     _check_curve3(profile)
     point, axis = _axis(axis_point, axis_dir)
     knots_u, unit, arc_w = unit_arc(start, end)
-    rel = profile.ctrl - point
-    centers = point + np.outer(rel @ axis, axis)                          # (n, 3)
-    radial = profile.ctrl - centers
-    radius = np.linalg.norm(radial, axis=1)
-    x = np.divide(radial, radius[:, None], out=np.zeros_like(radial), where=radius[:, None] > 0)
-    y = np.cross(axis, x)
-    net = (centers[None] + radius[None, :, None] *
-           (unit[:, None, :1] * x[None] + unit[:, None, 1:] * y[None]))  # (2k+1, n, 3)
+    with np.errstate(over="ignore", invalid="ignore"):   # coordinates near the float limit: said below
+        rel = profile.ctrl - point
+        centers = point + np.outer(rel @ axis, axis)                      # (n, 3)
+        radial = profile.ctrl - centers
+        radius = np.linalg.norm(radial, axis=1)
+        x = np.divide(radial, radius[:, None], out=np.zeros_like(radial), where=radius[:, None] > 0)
+        y = np.cross(axis, x)
+        net = (centers[None] + radius[None, :, None] *
+               (unit[:, None, :1] * x[None] + unit[:, None, 1:] * y[None]))  # (2k+1, n, 3)
+    if not np.isfinite(net).all():
+        raise GeometryError("the revolution's control net overflows: the profile's coordinates are too large")
     w_profile = profile.weights if profile.is_rational else np.ones(profile.n)
     weights = arc_w[:, None] * w_profile[None, :]
     return NurbsSurface(2, profile.degree, knots_u, profile.knots, net, weights)

@@ -35,7 +35,10 @@ def validate(model: O.Model) -> list[Diagnostic]:
     seen: set[int] = set()
     for obj in model.objects.values():
         try:
-            _visit(obj, model.tolerance, out, seen)
+            # numbers near the float limit overflow in the measures (lengths, distances): the object is
+            # then reported (E0510, or the check the infinite measure fails), not warned about
+            with np.errstate(over="ignore", invalid="ignore"):
+                _visit(obj, model.tolerance, out, seen)
         except GeometryError as exc:   # a form made on demand that cannot be (a net whose numbers overflow)
             out.append(error("E0510", str(exc), _span(obj), "cannot be built"))
     return out
