@@ -12,7 +12,7 @@ least 85 % of random cases (the failures are thin shapes; see the bounded-recove
 from __future__ import annotations
 
 import numpy as np
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from recovery_scans import random_rotation, superellipsoid_cloud
@@ -72,6 +72,7 @@ def test_recovery_with_noise_and_outliers_is_bounded():
 
 @settings(max_examples=6, deadline=None)
 @given(st.integers(0, 2**32 - 1), st.floats(0.001, 1000.0))
+@example(275, 1.0)   # a flat valley of the cost: sizes 0.6 % apart, exponents 2 %, the same surface to 0.2 %
 def test_fit_is_independent_of_frame_and_scale(seed, scale):
     rng = np.random.default_rng(seed)
     truth = _random_superellipsoid(rng)
@@ -79,10 +80,11 @@ def test_fit_is_independent_of_frame_and_scale(seed, scale):
     rot, shift = random_rotation(rng), rng.uniform(-1e3, 1e3, 3)
     a = fit_superellipsoid(points)
     b = fit_superellipsoid(scale * points @ rot.T + shift)
-    # the same surface (its parameters are defined up to the shape's symmetries, e.g. a1 <-> a2)
+    # the same surface (its parameters are defined up to the shape's symmetries, e.g. a1 <-> a2, and, where
+    # the cost is flat, to the trade between a semi-axis and the exponents: 1 %)
     on_a = scale * a.surface_points(rng.normal(size=(500, 3))) @ rot.T + shift
     assert np.median(b.radial_distance(on_a)) <= 2e-3 * scale * a.size.mean()
-    assert np.allclose(np.sort(b.size), scale * np.sort(a.size), rtol=5e-3)
+    assert np.allclose(np.sort(b.size), scale * np.sort(a.size), rtol=1e-2)
     assert np.allclose(b.center, scale * rot @ a.center + shift, atol=5e-3 * scale * a.size.max())
     assert abs(b.quality - a.quality) < 1e-3
 
