@@ -90,13 +90,23 @@ def test_polyline_kinks_and_errors():
         line.closest_point(np.zeros((2, 2)))
 
 
+def _crowded(degree_u, degree_v, knots_u, knots_v, ctrl, weights, query):
+    """The closest-point distance found and the least over a 1201 x 1201 sampling (the oracle)."""
+    from rgm.geometry import NurbsSurface
+
+    s = NurbsSurface(degree_u, degree_v, knots_u, knots_v, np.array(ctrl), np.array(weights))
+    query = np.array([query])
+    grid = np.linspace(0, 1, 1201)
+    sampled = np.linalg.norm(s.evaluate_grid(grid, grid).reshape(-1, 3) - query, axis=1).min()
+    return s.closest_point(query)[3][0], sampled
+
+
 def test_a_minimum_in_a_stretch_the_weights_crowd_is_found():
     """A rational bilinear 4 x 4 net (weights 0.37-2.87, found by hypothesis) crowds much of the surface
     into the 0.01 of u past its kink at u = 0.407: the global minimum for this query lies there, in a dip
     narrower than the control-polygon-adapted fine grid's spacing, and was missed (0.1105 found for a
-    sampled 0.0473). The fine grid spreads half its samples by the coarse grid's chord lengths."""
-    from rgm.geometry import NurbsSurface
-
+    sampled 0.0473). The fine grid spreads half its samples by the coarse grid's chord lengths, and nets
+    whose weights vary this much are searched by branch and bound on their Bézier patches."""
     ctrl = [[[0.923314, 0.44958, 0.082454], [-0.446218, -0.678696, 0.939851], [0.032137, -0.768269, 0.24698],
              [0.553366, 0.226007, 0.834595]],
             [[-0.920814, 0.057179, -0.081328], [-0.875301, 0.282656, 0.705266], [0.185882, -0.479805, 0.679763],
@@ -107,10 +117,32 @@ def test_a_minimum_in_a_stretch_the_weights_crowd_is_found():
              [0.927342, -0.69895, -0.035575]]]
     weights = [[1.681918, 2.866252, 0.689231, 2.861354], [1.141945, 1.442981, 2.534797, 1.404838],
                [1.783903, 0.37441, 2.334485, 1.752987], [1.190276, 2.428757, 1.118626, 1.524444]]
-    s = NurbsSurface(1, 1, [0, 0, 0.14868, 0.406988, 1, 1], [0, 0, 0.289192, 0.74035, 1, 1], np.array(ctrl),
-                     np.array(weights))
-    query = np.array([[0.24099715796055188, -0.6039116015432322, 0.5159846338690781]])
-    grid = np.linspace(0, 1, 1201)
-    sampled = np.linalg.norm(s.evaluate_grid(grid, grid).reshape(-1, 3) - query, axis=1).min()
-    assert sampled < 0.048
-    assert s.closest_point(query)[3][0] <= sampled + 1e-12
+    found, sampled = _crowded(1, 1, [0, 0, 0.14868, 0.406988, 1, 1], [0, 0, 0.289192, 0.74035, 1, 1], ctrl,
+                              weights, [0.24099715796055188, -0.6039116015432322, 0.5159846338690781])
+    assert sampled < 0.048 and found <= sampled + 1e-12
+
+
+def test_a_minimum_in_a_corner_dip_of_a_rational_net_is_found():
+    """Degree (1, 3), 4 x 7, weights 0.41-2.82 (hypothesis, explore profile): the nearest point to this
+    query lies in a dip at the corner u = 1, v = 0.993, 0.002 wide in u; every start of the sampling
+    ended on a local minimum on the edge v = 1 (0.46997 for a sampled 0.46731). The branch and bound on
+    the Bézier patches' control boxes finds it."""
+    ctrl = [[[0.825571, 0.526702, 0.164571], [-0.715772, 0.11854, 0.063045], [-0.810418, -0.09304, -0.415795],
+             [-0.898458, 0.171234, -0.503928], [-0.575094, -0.809451, -0.490488], [-0.324162, -0.941468, -0.926724],
+             [-0.868112, 0.025618, -0.573837]],
+            [[0.20878, -0.401326, -0.389105], [-0.168587, -0.75132, 0.211566], [0.128269, 0.352695, 0.546592],
+             [-0.993927, 0.277912, -0.711377], [-0.175395, 0.037668, 0.465095], [0.984016, -0.996396, -0.767248],
+             [0.588538, -0.143624, 0.097105]],
+            [[0.11127, 0.437761, 0.438124], [-0.334726, -0.360381, -0.173478], [-0.128473, 0.344335, 0.634063],
+             [0.581673, 0.139844, -0.162203], [0.411102, -0.34876, 0.05943], [-0.668715, 0.382501, -0.685585],
+             [-0.435693, 0.842096, 0.01994]],
+            [[0.827041, -0.189444, -0.20178], [-0.410683, 0.906762, 0.971552], [-0.219023, 0.130926, -0.288743],
+             [-0.740413, -0.541355, 0.976135], [-0.734613, -0.939685, 0.353665], [-0.228063, 0.654839, 0.676883],
+             [-0.493273, 0.991591, -0.359562]]]
+    weights = [[0.506576, 0.686992, 1.57804, 0.466283, 2.647361, 2.724673, 0.784992],
+               [1.153866, 1.089583, 1.945675, 0.434148, 2.820049, 1.598585, 0.654219],
+               [0.771433, 0.413762, 2.450803, 1.715486, 2.330694, 2.510171, 0.720505],
+               [2.247796, 2.408333, 0.889563, 1.667098, 1.025025, 1.698324, 0.454585]]
+    found, sampled = _crowded(1, 3, [0, 0, 0.349256, 0.417567, 1, 1], [0, 0, 0, 0, 0.112458, 0.112458, 0.112458, 1, 1, 1, 1],
+                              ctrl, weights, [-0.5800215273333843, 1.3840525342093706, -0.10247989481662523])
+    assert sampled < 0.4674 and found <= sampled + 1e-12
