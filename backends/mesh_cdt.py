@@ -180,36 +180,44 @@ def _insert_segment(p, tri, a, b, constrained, n_fixed):
 def _flip_in(p, tri, a, b):
     """Make (a, b) an edge of the counter-clockwise triangles `tri` by flipping the edges that cross it
     (Sloan, "A fast algorithm for generating constrained Delaunay triangulations", Computers & Structures
-    47(3), 1993): an edge crossed by ab whose two triangles form a strictly convex quadrilateral is
-    replaced by the quadrilateral's other diagonal; one that does not is left for a later round. No
-    vertex is removed. The caller has checked that no segment crosses ab."""
-    pa, pb, n = p[a], p[b], len(p)
-    for _ in range(4 * len(tri) + 16):
-        c, d = tri, tri[:, _NEXT]
-        oc, od = _orient(pa, pb, p[c]), _orient(pa, pb, p[d])
-        crossing = (oc * od < 0) & (_orient(p[c], p[d], pa) * _orient(p[c], p[d], pb) < 0)
-        if not crossing.any():
-            return tri
-        key = (c * n + d)[crossing]                               # directed crossed edges u -> v
-        rows, cols = np.nonzero(crossing)
-        back = {k: i for i, k in enumerate((d * n + c)[crossing].tolist())}   # the twin's position
-        flipped = False
-        for i, k in enumerate(key.tolist()):
-            j = back.get(k)
-            if j is None:
-                continue
-            t1, t2 = rows[i], rows[j]
-            u, v = tri[t1, cols[i]], tri[t1, (cols[i] + 1) % 3]
-            w = tri[t1, (cols[i] + 2) % 3]                        # (u, v, w) counter-clockwise
-            x = tri[t2, (cols[j] + 2) % 3]                        # (v, u, x) counter-clockwise
-            if _orient(p[x], p[w], p[u]) > 0 and _orient(p[w], p[x], p[v]) > 0:   # u, x, v, w convex
-                tri = tri.copy()
-                tri[t1], tri[t2] = (u, x, w), (x, v, w)
-                flipped = True
-                break
-        if not flipped:
+    47(3), 1993): the crossing edges wait in a queue; one whose two triangles form a strictly convex
+    quadrilateral is replaced by the quadrilateral's other diagonal, which joins the back of the queue
+    if it still crosses ab; one that does not goes to the back to wait. The queue order is what makes it
+    end (taking always the first flippable edge can flip one pair back and forth). No vertex is
+    removed. The caller has checked that no segment crosses ab."""
+    from collections import deque
+
+    pa, pb = p[a], p[b]
+    tri = tri.copy()
+
+    def crosses(u, v):
+        return (_orient(pa, pb, p[u]) * _orient(pa, pb, p[v]) < 0) and \
+            (_orient(p[u], p[v], pa) * _orient(p[u], p[v], pb) < 0)
+
+    c, d = tri, tri[:, _NEXT]
+    crossing = (_orient(pa, pb, p[c]) * _orient(pa, pb, p[d]) < 0) & \
+        (_orient(p[c], p[d], pa) * _orient(p[c], p[d], pb) < 0)
+    queue = deque({(min(u, v), max(u, v)) for u, v in zip(c[crossing].tolist(), d[crossing].tolist())})
+    waited = 0
+    while queue:
+        if waited > len(queue):   # a whole round of the queue with no flip
             raise BackendError("a trimming segment could not be recovered by edge flips")
-    raise BackendError("a trimming segment could not be recovered by edge flips")
+        u, v = queue.popleft()
+        t1, k1 = np.nonzero((tri == u) & (tri[:, _NEXT] == v))
+        t2, k2 = np.nonzero((tri == v) & (tri[:, _NEXT] == u))
+        if not len(t1) or not len(t2):
+            raise BackendError("a trimming segment could not be recovered by edge flips")
+        t1, k1, t2, k2 = int(t1[0]), int(k1[0]), int(t2[0]), int(k2[0])
+        w, x = tri[t1, (k1 + 2) % 3], tri[t2, (k2 + 2) % 3]     # (u, v, w) and (v, u, x) counter-clockwise
+        if not (_orient(p[x], p[w], p[u]) > 0 and _orient(p[w], p[x], p[v]) > 0):   # u, x, v, w not convex
+            queue.append((u, v))
+            waited += 1
+            continue
+        tri[t1], tri[t2] = (u, x, w), (x, v, w)
+        waited = 0
+        if crosses(w, x):
+            queue.append((min(w, x), max(w, x)))
+    return tri
 
 
 def _components(n, a, b) -> np.ndarray:

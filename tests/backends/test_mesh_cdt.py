@@ -93,6 +93,7 @@ def edge_set(tri):
 @given(st.integers(0, 2**32 - 1), st.booleans())
 @example(1507521, True)   # a free point 0.008 from a hole's side, every triangle round it crossed by that
 #                           side: its recovery by pseudo-polygons dropped the point (now recovered by flips)
+@example(142, False)      # the flips, always taking the first flippable edge, flipped a pair back and forth
 def test_points_inserted_locally_give_the_fresh_triangulation(seed, grid):
     """The mesher's passes add free points to the same boundary: with an `Incremental` state they are
     inserted into the previous triangulation (the cavity of triangles whose circumcircles hold them is
