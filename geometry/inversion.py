@@ -17,9 +17,11 @@ as arrays:
   (an active set), the rest move; every step is clamped to the domain;
 - damping: a step that does not reduce the distance is rejected and the damping raised, so the
   distance never increases and minima on the boundary are found too;
-- global check: a rational net whose weights vary by more than WEIGHT_SPREAD can crowd its surface into
-  stretches no sampling sees; its answers are made global by branch and bound on its Bézier patches'
-  control boxes (`_branch_and_bound`; 2-3.5x the time of the sampled search on such nets).
+- global check: a surface of several smooth pieces (C0 knots: a revolution's quarter circles and its
+  profile's corners, where the starts of one piece can miss another, and near a pole every piece's
+  samples tie), or a rational net whose weights vary by more than WEIGHT_SPREAD (crowding its surface
+  into stretches no sampling sees), has its answers made global by branch and bound on its Bézier
+  patches' control boxes (`_branch_and_bound`; on such nets up to 3.5x the time of the sampled search).
 """
 from __future__ import annotations
 
@@ -32,7 +34,7 @@ __all__ = ["closest_point_curve", "closest_point_surface", "distance_bound_surfa
 SEEDS = 6          # Newton starts per query point (surfaces: 4 basins + 2 nearest)
 COARSE, FINE = 40, 240   # samples per direction (about) of the surface seed grids
 MAX_ITER = 60
-WEIGHT_SPREAD = 2.0   # rational nets whose weights vary more than this get the branch and bound too
+WEIGHT_SPREAD = 2.0   # rational nets whose weights vary more than this get the branch and bound
 
 
 def _queries(points, dim):
@@ -286,7 +288,8 @@ def closest_point_surface(surface, points):
 
     x, dist, f = _newton(evaluate, x0, lo, hi, target)
     uv, pts, dist = _best(queries, x, dist, f, count)
-    if surface.is_rational and surface.weights.max() > WEIGHT_SPREAD * surface.weights.min():
+    kinked = len(bu) > 2 or len(bv) > 2      # C0 knots: pieces the starts may miss (a revolution's quarters)
+    if kinked or (surface.is_rational and surface.weights.max() > WEIGHT_SPREAD * surface.weights.min()):
         uv, pts, dist = _branch_and_bound(surface, evaluate, queries, uv, pts, dist)
     return uv[:, 0], uv[:, 1], pts, dist
 

@@ -146,3 +146,27 @@ def test_a_minimum_in_a_corner_dip_of_a_rational_net_is_found():
     found, sampled = _crowded(1, 3, [0, 0, 0.349256, 0.417567, 1, 1], [0, 0, 0, 0, 0.112458, 0.112458, 0.112458, 1, 1, 1, 1],
                               ctrl, weights, [-0.5800215273333843, 1.3840525342093706, -0.10247989481662523])
     assert sampled < 0.4674 and found <= sampled + 1e-12
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**31))
+def test_points_just_off_a_revolution_of_a_polyline_are_found_near(seed):
+    """Points a small step (up to 0.3, profile ~20 across) off a revolution of a random polyline profile
+    that starts and ends on the axis (end discs: poles where the quarter circles' samples all tie) lie
+    no farther from it than that step: the closest point found is never farther. Before the pieces
+    were searched by branch and bound, 15 of 2000 such points by the pin's end discs came out up to
+    2.1 mm off (every start in another quarter of the circle than the point)."""
+    from rgm.geometry.conics import polyline_curve
+    from rgm.geometry.revolve import revolution_surface
+
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(3, 7))
+    radius = rng.uniform(2, 10, k)
+    height = np.cumsum(rng.uniform(1, 8, k))
+    profile = np.column_stack([np.r_[0, radius, 0], np.zeros(k + 2), np.r_[0, height, height[-1] + rng.uniform(1, 5)]])
+    s = revolution_surface(polyline_curve(profile), [0, 0, 0], [0, 0, 1])
+    on = s.evaluate(rng.uniform(0, 1, 400), rng.uniform(0, 1, 400))
+    step = rng.normal(size=(400, 3))
+    step *= rng.uniform(0, 0.3, (400, 1)) / np.linalg.norm(step, axis=1, keepdims=True)
+    dist = s.closest_point(on + step)[3]
+    assert np.all(dist <= np.linalg.norm(step, axis=1) + 1e-9)
