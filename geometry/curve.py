@@ -214,7 +214,10 @@ class NurbsCurve:
         The homogeneous control points are mapped, which is exact for affine and projective maps.
         """
         matrix = V.check_matrix(matrix, self.dim)
-        pw = self._pw @ matrix.T
+        with np.errstate(over="ignore", invalid="ignore"):
+            pw = self._pw @ matrix.T
+        if not np.isfinite(pw).all():
+            raise GeometryError("the transform takes the control points beyond the floating-point range")
         rational = self.is_rational or not np.allclose(matrix[-1, :-1], 0.0) or matrix[-1, -1] != 1.0
         if np.any(pw[:, -1] <= 0):
             raise GeometryError("projective transform sends a control point to a non-positive weight")

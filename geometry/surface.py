@@ -334,7 +334,10 @@ class NurbsSurface:
     def transform(self, matrix) -> "NurbsSurface":
         """Apply a 4x4 homogeneous transform to the control net (exact for affine/projective maps)."""
         matrix = V.check_matrix(matrix, 3)
-        pw = self._pw @ matrix.T
+        with np.errstate(over="ignore", invalid="ignore"):
+            pw = self._pw @ matrix.T
+        if not np.isfinite(pw).all():
+            raise GeometryError("the transform takes the control points beyond the floating-point range")
         rational = self.is_rational or not np.allclose(matrix[3, :3], 0.0) or matrix[3, 3] != 1.0
         if np.any(pw[..., 3] <= 0):
             raise GeometryError("projective transform sends a control point to a non-positive weight")
