@@ -39,7 +39,11 @@ def as_arc(curve):
     if dim == 2:
         n = np.array([0.0, 0.0, np.sign(n[2])])
     if np.linalg.norm(p3[-1] - p3[0]) <= 1e-12 * r[0]:
-        return Circle(centre[:dim], n, float(r.mean()))
+        # a Circle starts on its own axis (`rgm.geometry.conics.perpendicular`): only a curve that starts
+        # there is one; another full circle stays the B-spline it is, its parameterisation kept
+        circle = Circle(centre[:dim], n, float(r.mean()))
+        start = circle.nurbs().evaluate(np.array([0.0]))[0]
+        return circle if np.linalg.norm(start - p[0]) <= 1e-9 * r[0] else None
     return CircularArc(centre[:dim], n, float(np.linalg.norm(p3[0] - centre)), p[0], p[-1])
 
 

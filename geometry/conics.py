@@ -107,7 +107,9 @@ def perpendicular(normal) -> np.ndarray:
     if not np.isfinite(length) or length < _EPS:
         raise GeometryError("normal / axis direction has zero length")
     n = normal / length
-    helper = np.eye(3)[int(np.argmin(np.abs(n)))]
+    # components within round-off of zero count as zero, so a normal a hair off an axis (a circle read back
+    # from its points) gets the same start axis as the axis itself (ties go to the first: +x about +z)
+    helper = np.eye(3)[int(np.argmin(np.where(np.abs(n) < 1e-12, 0.0, np.abs(n))))]
     x = helper - np.dot(helper, n) * n
     return x / np.linalg.norm(x)
 

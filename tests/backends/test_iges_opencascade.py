@@ -159,3 +159,25 @@ def test_verify_fails_and_keeps_no_file_when_the_reader_disagrees(tmp_path, monk
     with pytest.raises(BackendError, match="deviates"):
         write_iges(model, tmp_path / "bad.igs", verify=True)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_full_circle_read_back_keeps_where_it_starts():
+    """A 126 full circle is read as a Circle only when it starts where a Circle starts (on the axis
+    `perpendicular` gives its normal); one starting elsewhere stays the B-spline it is, so its points keep
+    their parameters. The normal a reader finds from three points is a hair off the axis: it gets the
+    same start axis (--hypothesis-profile=explore drew a circle read back a quarter turn round)."""
+    from rgm.backends.iges_shapes import as_arc
+    from rgm.geometry.conics import arc_curve, circle_curve, perpendicular
+    from rgm.model import BSplineCurve, Circle
+
+    assert np.allclose(perpendicular([1e-17, 0.0, 1.0]), [1.0, 0.0, 0.0], rtol=0, atol=1e-15)
+    assert np.allclose(perpendicular([0.0, -1e-16, 1.0]), [1.0, 0.0, 0.0], rtol=0, atol=1e-15)
+    centre = np.array([-2.29080171, -0.22413248, 0.59669868])
+    canonical = circle_curve(centre, [0, 0, 1], 3.6126374083600084)
+    assert isinstance(as_arc(canonical), Circle)
+    turned = arc_curve(centre, [0, 1, 0], [-1, 0, 0], 3.6126374083600084, 0.0, 2 * np.pi)
+    assert as_arc(turned) is None
+    model = Model("mm", 1e-3, {"c": BSplineCurve(turned, name="c")}, ("c",))
+    back = read_iges(iges_text(model, nurbs_only=True)).model
+    t = np.linspace(0, 1, 17)
+    assert np.abs(back.objects["c"].nurbs().evaluate(t) - turned.evaluate(t)).max() <= 1e-12
