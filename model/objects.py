@@ -92,7 +92,9 @@ class TrimmedFace(ModelObject):
         memo = {} if memo is None else memo
         surface = memo.setdefault(id(self.surface), self.surface.transform(matrix))
         s = _scale_of(matrix)
-        uv = np.diag([s, s, 1.0, 1.0]) if isinstance(self.surface, Plane) and s != 1.0 else None
+        # (scaled in z too, which 2-D pieces lack, so that the matrix is a similarity by s: an arc's radius
+        # takes its uniform scale, s, as its points do; diag(s, s, 1) gave it s^(2/3))
+        uv = np.diag([s, s, s, 1.0]) if isinstance(self.surface, Plane) and s != 1.0 else None
         return replace(self, surface=surface,
                        outer=None if self.outer is None else self.outer.transform(matrix, memo, uv),
                        holes=tuple(h.transform(matrix, memo, uv) for h in self.holes))

@@ -152,3 +152,24 @@ def test_transform_objects_are_immutable_4x4_similarities():
     with pytest.raises(GeometryError):
         Transform(np.eye(3))
     assert np.allclose(t.after(t.inverse()).matrix, np.eye(4))
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.floats(0.1, 10.0), st.floats(0.0, 2 * np.pi))
+def test_a_scaled_plane_face_keeps_its_arcs_on_their_circles(scale, turn):
+    """A trimmed face on a plane, a half-disc hole (a 2-D arc and its chord) in its loops, scaled by s:
+    the hole's arc is still a circle through its ends (radius s r = |start - centre|), where the plane
+    coordinates of every point scale by s (an arc's radius took s^(2/3): --hypothesis-profile=explore)."""
+    from rgm.model import CircularArc, Line, Loop, Plane, TrimmedFace
+    from rgm.model.transform import scaling
+
+    c, r = np.array([-1.9, 0.3]), 0.55
+    a, b = c + r * np.array([np.cos(turn), np.sin(turn)]), c - r * np.array([np.cos(turn), np.sin(turn)])
+    hole = Loop((CircularArc(c, [0, 0, 1.0], r, a, b), Line(b, a)))
+    square = np.array([[-4.0, -3], [3, -3], [3, 3], [-4, 3]])
+    outer = Loop(tuple(Line(square[k], square[(k + 1) % 4]) for k in range(4)))
+    face = TrimmedFace(Plane([1.0, 2, 3], [0, 0, 1.0]), outer, (hole,))
+    arc = face.transform(scaling(scale, [0.5, -1.0, 2.0])).holes[0].pieces[0]
+    assert np.isclose(arc.radius, scale * r, rtol=1e-12)
+    assert np.isclose(np.linalg.norm(arc.start_point - arc.center), arc.radius, rtol=1e-12)
+    assert np.isclose(np.linalg.norm(arc.end_point - arc.center), arc.radius, rtol=1e-12)
