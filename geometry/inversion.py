@@ -323,6 +323,17 @@ def _halves(nets, axis):
     return np.moveaxis(np.stack(first), 0, axis), np.moveaxis(np.stack(second[::-1]), 0, axis)
 
 
+def _box_distance(lo, hi, x):
+    """Distances from points x (..., 3) to axis-aligned boxes [lo, hi] (..., 3) (0 inside), broadcast."""
+    return np.linalg.norm(np.maximum(lo - x, 0) + np.maximum(x - hi, 0), axis=-1)
+
+
+def _nearest_per_query(qi, d):
+    """Indices of the least `d` among the entries of each query index in `qi` (one per query present)."""
+    order = np.lexsort((d, qi))
+    return order[np.r_[True, qi[order][1:] != qi[order][:-1]]] if len(order) else order
+
+
 def _branch_and_bound(surface, evaluate, queries, uv, pts, dist, levels: int = 10, keep: int = 8):
     """The answers (uv (k, 2), pts (k, 3), dist (k,)) made global by branch and bound on the Bézier
     patches: a patch lies in the box of its control points (positive weights: the convex hull
@@ -341,28 +352,21 @@ def _branch_and_bound(surface, evaluate, queries, uv, pts, dist, levels: int = 1
     step = max(1, (1 << 22) // (3 * len(nets)))
     for start in range(0, len(queries), step):
         x = queries[start:start + step, None]
-        gap = np.maximum(lo_box[None] - x, 0) + np.maximum(x - hi_box[None], 0)
-        a, b = np.nonzero(np.linalg.norm(gap, axis=2) < dist[start:start + step, None] - eps)
+        a, b = np.nonzero(_box_distance(lo_box[None], hi_box[None], x) < dist[start:start + step, None] - eps)
         found.append((a + start, b))
     qi, pi = np.concatenate([a for a, _ in found]), np.concatenate([b for _, b in found])
     home = rects[pi]                                                        # each pair's Bézier patch
     cur, box = nets[pi], rects[pi]
 
-    def bound(cur):
-        e = cur[..., :3] / cur[..., 3:]
-        x = queries[qi][:, None, None]
-        gap = np.maximum(e.min(axis=(1, 2))[:, None, None] - x, 0) + np.maximum(x - e.max(axis=(1, 2))[:, None, None], 0)
-        return np.linalg.norm(gap[:, 0, 0], axis=1), e
-
     for level in range(levels + 1):
-        lower, e = bound(cur)
+        e = cur[..., :3] / cur[..., 3:]
+        lower = _box_distance(e.min(axis=(1, 2)), e.max(axis=(1, 2)), queries[qi])
         corners = e[:, [0, -1, 0, -1], [0, 0, -1, -1]]                       # (P, 4, 3) points on the surface
         cd = np.linalg.norm(corners - queries[qi][:, None], axis=2)
         c_uv = np.stack([box[:, [0, 1, 0, 1], 0], box[:, [0, 0, 1, 1], 1]], axis=2)   # (P, 4, 2)
         j = cd.argmin(axis=1)
         cdj = cd[np.arange(len(cd)), j]
-        order = np.lexsort((cdj, qi))
-        first = order[np.r_[True, qi[order][1:] != qi[order][:-1]]] if len(order) else order
+        first = _nearest_per_query(qi, cdj)
         win = first[cdj[first] < dist[qi[first]]]
         uv[qi[win]], pts[qi[win]], dist[qi[win]] = c_uv[win, j[win]], corners[win, j[win]], cdj[win]
         live = lower < dist[qi] - eps
@@ -388,8 +392,7 @@ def _branch_and_bound(surface, evaluate, queries, uv, pts, dist, levels: int = 1
     top = np.r_[surface.domain[0][1], surface.domain[1][1]]
     hi = np.where(home[:, 1] < top, np.nextafter(home[:, 1], -np.inf), home[:, 1])
     x, d, f = _newton(evaluate, x0, home[:, 0], hi, queries[qi])
-    order = np.lexsort((d, qi))
-    first = order[np.r_[True, qi[order][1:] != qi[order][:-1]]]
+    first = _nearest_per_query(qi, d)
     take = first[d[first] < dist[qi[first]]]
     uv[qi[take]], pts[qi[take]], dist[qi[take]] = x[take], f[take], d[take]
     return uv, pts, dist

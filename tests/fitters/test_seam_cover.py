@@ -40,17 +40,20 @@ def _hole(patches, tilt_deg, tol):
     return float(np.minimum(*(written_face(q.shape).distance(probe) for q in patches)).max())
 
 
+def _fitted(points, left, right, tol):
+    """(spacing, the two halves fitted as patches over their base plane, their seam's gaps)."""
+    spacing = median_spacing(cKDTree(points))
+    patches = [_fit_patch(points, idx, Base("plane", 1.0), reach_past(points[idx], *unit_box(points[idx][:, :2]),
+                                                                      5 * spacing), tol, "p95", 4000)
+               for idx in (left, right)]
+    return spacing, patches, g0_gaps(points, patches, 5 * spacing)
+
+
 @pytest.mark.parametrize("seed", [0, 1])
 def test_a_gap_between_trims_closes_where_the_surfaces_pass_within_tol(seed):
     tol = 0.3
     points, left, right = _halves(seed, gap=1.2, tilt_deg=1.0)
-    spacing = median_spacing(cKDTree(points))
-    patches = []
-    for idx in (left, right):
-        uv = unit_box(points[idx][:, :2])
-        patches.append(_fit_patch(points, idx, Base("plane", 1.0), reach_past(points[idx], *uv, 5 * spacing),
-                                  tol, "p95", 4000))
-    gaps = g0_gaps(points, patches, 5 * spacing)
+    spacing, patches, gaps = _fitted(points, left, right, tol)
     assert len(gaps) == 1 and gaps[0].max > 2 * tol     # the trims stop at their data, 1.2 mm apart
     assert _hole(patches, 1.0, tol) > 2 * tol
     grown, after = _covered(points, patches, gaps, tol, "p95", 5 * spacing)
@@ -64,19 +67,14 @@ def test_a_gap_between_trims_closes_where_the_surfaces_pass_within_tol(seed):
     assert _hole(grown, 1.0, tol) <= tol
     assert len(after) == 1 and after[0].p95 <= tol and after[0].max < gaps[0].max
 
+
 def test_a_gap_the_surfaces_do_not_close_is_left_as_measured():
     """Surfaces 20 degrees apart leave more than the tolerance between them a few tenths of a mm from
     where they cross: nothing to cover within it, so the seam keeps its figure (no trim is grown to a
     surface that is not there)."""
     tol = 0.05
     points, left, right = _halves(2, gap=1.2, tilt_deg=20.0)
-    spacing = median_spacing(cKDTree(points))
-    patches = []
-    for idx in (left, right):
-        uv = unit_box(points[idx][:, :2])
-        patches.append(_fit_patch(points, idx, Base("plane", 1.0), reach_past(points[idx], *uv, 5 * spacing),
-                                  tol, "p95", 4000))
-    gaps = g0_gaps(points, patches, 5 * spacing)
+    spacing, patches, gaps = _fitted(points, left, right, tol)
     grown, after = _covered(points, patches, gaps, tol, "p95", 5 * spacing)
     assert after[0].max > tol
     assert after[0].max >= 0.9 * gaps[0].max or all(g.shape is p.shape for g, p in zip(grown, patches))
