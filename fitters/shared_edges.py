@@ -230,8 +230,10 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
     angle = _normals_angle(si, sj, loops[i].uv[run_i], loops[i].xyz[run_i])
     if angle < _TANGENT_DEG:
         return f"the surfaces meet nearly tangentially along the seam ({angle:.0f} degrees apart)"
+    # only the branches that pass the seam are traced (each whole: the same branches, closed ones closed)
+    region = dict(near=np.vstack([loops[a].xyz[runs[a].idx] for a in (i, j)]), radius=max(near, 2 * tol))
     try:
-        branches = intersect_surfaces(si, sj, tol)
+        branches = intersect_surfaces(si, sj, tol, **region)
     except GeometryError as exc:
         return f"their intersection could not be approximated ({exc})"
     best = None
@@ -281,7 +283,7 @@ def _candidate(i, j, shapes, loops, tol, near, spacing):
             return (f"their intersection runs along the edge of surface {a + 1}'s domain: the surfaces do not "
                     f"cross there, they only come within the tolerance")
     try:   # the same stretch on one branch of a finer approximation: what an exact intersector finds
-        fine = intersect_surfaces(si, sj, tol / _FINER)
+        fine = intersect_surfaces(si, sj, tol / _FINER, **region)
     except GeometryError as exc:
         return f"their intersection could not be approximated more finely ({exc})"
     k = np.unique(np.linspace(lo, hi, 200).astype(int))

@@ -372,7 +372,17 @@ def _subdivide(problem, xs, closed: bool, eps: float, tol: float, rounds: int = 
     return None
 
 
-def _solve(problem, size: float, tol: float, samples: int) -> list[IntersectionBranch]:
+def _near(problem, x, region) -> np.ndarray:
+    """(m,) bool: the points of parameters x (m, n) within `region` = (points (k, 3), radius) (all: None)."""
+    if region is None or len(x) == 0:
+        return np.ones(len(x), bool)
+    from scipy.spatial import cKDTree
+
+    points, radius = region
+    return np.isfinite(cKDTree(points).query(problem.eval(x)[2], distance_upper_bound=radius)[0])
+
+
+def _solve(problem, size: float, tol: float, samples: int, region=None) -> list[IntersectionBranch]:
     if not tol > 0:
         raise GeometryError(f"intersection tolerance must be positive, got {tol}")
     eps = min(tol * 1e-3, 1e-9 * size + 1e-300) if size > 0 else tol * 1e-3
@@ -381,7 +391,7 @@ def _solve(problem, size: float, tol: float, samples: int) -> list[IntersectionB
     if len(seeds) == 0:
         return []
     seeds, ok = _newton_min_norm(problem, seeds, eps)
-    seeds = seeds[ok]
+    seeds = seeds[ok & _near(problem, seeds, region)]
     hmax = size / 8
     # Cubic interpolation of points whose chord sagitta is s errs by about s^2 / (6 R) on a curve of
     # radius R: start from s = sqrt(tol * size) and shrink it until the measured error holds.
@@ -439,11 +449,16 @@ def intersect_surface_plane(surface, origin, normal, tol: float) -> list[Interse
     return _solve(problem, _size(surface), tol, _samples(surface))
 
 
-def intersect_surfaces(sa, sb, tol: float) -> list[IntersectionBranch]:
-    """Branches of NurbsSurface sa ∩ NurbsSurface sb within `tol`; transversal intersections only."""
+def intersect_surfaces(sa, sb, tol: float, near=None, radius: float = 0.0) -> list[IntersectionBranch]:
+    """Branches of NurbsSurface sa ∩ NurbsSurface sb within `tol`; transversal intersections only.
+
+    With `near` (k, 3): only the branches that pass within `radius` of those points, each traced whole over
+    both surfaces exactly as without it (the same seeds, marches and fits; closed loops stay closed): where
+    one stretch of a large pair's intersection is wanted, the branches elsewhere cost nothing."""
     problem = _SurfaceProblem(sa, sb)
     size = max(_size(sa), _size(sb))
-    return _solve(problem, size, tol, max(_samples(sa, 32), _samples(sb, 32)))
+    region = None if near is None else (np.asarray(near, float).reshape(-1, 3), float(radius))
+    return _solve(problem, size, tol, max(_samples(sa, 32), _samples(sb, 32)), region)
 
 
 def intersect_curve_plane(curve, origin, normal, iters: int = 60):

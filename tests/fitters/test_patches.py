@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import example, given, settings, strategies as st
 from scipy.spatial import cKDTree
 
 import rgm
@@ -138,6 +138,7 @@ def purity(groups, truth):
 
 @settings(max_examples=10, deadline=None)
 @given(st.integers(0, 2**32 - 1))
+@example(89150283)   # a crease point 4 mm from a corner, 0.09 mm off its face, joined the face 0.49 mm away
 def test_a_noisy_box_splits_into_its_six_faces(seed):
     rng = np.random.default_rng(seed)
     half = rng.uniform(15, 40, 3)
@@ -307,7 +308,8 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     # the bottom, shoulder and cap creases are shared where the surfaces cross (each reaches past its data,
     # so no domain edge clamps the intersection): within the tolerance along the edge; every pair not
     # shared says why. Seams are measured face to face as written (a boundary sample to the nearest other
-    # trimmed face): 19 of 23 within 1 mm, worst 2.77 mm, 7 shared, their edges within 0.15 mm (12 of 21
+    # trimmed face): 14 of 14 within 1 mm, worst 0.55 mm, 8 shared (19 of 23, worst 2.77 mm, before crease
+    # points joined the patch whose plane fitted to 24 smooth points they lie on; 12 of 21
     # before trims were grown to their neighbours, rgm.fitters.seam_cover; 10 of 21 and 6 shared before
     # the refinement split spans beside narrow failing ones and steep pieces tried their halves). Measured
     # to the other patch's untrimmed surface instead, as before 2026-12-06, the same kind of fit read 21 of
@@ -318,7 +320,7 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path):
     assert any("closed round its axis" in g.why and not g.shared for g in result.gaps)
     assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     within = sum(g.max <= 1.0 for g in result.gaps)
-    assert within >= 15   # a regression floor (19 here; figures move with the machine's rounding)
+    assert within >= 0.8 * len(result.gaps)   # a regression floor (all here; figures move with the machine's rounding)
     assert max(g.max for g in shared) < min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
     for g in shared:   # one binding, used by both faces' loops
@@ -360,8 +362,10 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
     # Seams measured face to face as written (a boundary sample to the nearest other trimmed face, `g0_gaps`):
-    # 36 of 54 within 1 mm, worst 2.91 mm, 15 shared (1 as a seam curve), their edges within 1 mm (26 of 49
-    # before trims were grown to their neighbours; 19 of 41, 11 shared before 50372e5). Measured
+    # 33 of 49 within 1 mm, worst 3.95 mm, 15 shared (9 as seam curves), their edges within 1 mm (36 of 54,
+    # worst 2.91 mm, before crease points joined the patch whose plane fitted to 24 smooth points they lie
+    # on: the pieces change, seeds 2-3 gaining 43/75 and 51/79 from 28/61 and 19/48; 26 of 49 before trims
+    # were grown to their neighbours; 19 of 41, 11 shared before 50372e5). Measured
     # to the other patch's untrimmed surface instead, as before 2026-12-06: 36 of 41, worst 2.81 mm (seeds
     # 2-4 39/54, 25/40, 35/50), and earlier, measured on the data loops, 37 of 41: the rolled rim's slivers
     # and the lid's three-patch corners leave trims that stop 1-4 mm short of their neighbours' (the
@@ -374,7 +378,7 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     # the figures move by machine (floating-point differences steer discrete choices: the segmentation's
     # pieces, the knots inserted): without the extension 37 of 42, worst 1.77 mm, on one; 32 of 41, worst
     # 1.81 mm, on another
-    assert sum(g <= 1.0 for g in gaps) >= 29 and max(gaps) < 5.0   # regression bounds (36 and 2.91 mm here)
+    assert sum(g <= 1.0 for g in gaps) >= 0.6 * len(gaps) and max(gaps) < 5.0   # regression bounds (33 of 49, 3.95 mm)
     assert all(g.max < g.before for g in curves)
     assert all(g.why for g in result.gaps if not g.shared)
     text, _ = patches_text(result, 1.0, title="meat can")

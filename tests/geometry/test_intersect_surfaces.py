@@ -68,3 +68,44 @@ def test_sphere_and_planar_patch_meet_in_the_known_circle():
     assert np.abs(pts[:, 2] - height).max() <= tol
     assert np.diff(np.sort(np.arctan2(pts[:, 1], pts[:, 0]))).max() < 0.1
     assert len(branches) == 1
+
+
+def _polyline(branch, n=300):
+    return branch.curve.evaluate(np.linspace(*branch.curve.domain, n))
+
+
+@settings(max_examples=6, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), pick=st.integers(0, 2**16))
+def test_near_traces_only_the_branches_that_pass_there_each_whole(seed, pick):
+    """A bumpy surface crosses a flat one in several branches; asked for those near a few points of one,
+    `intersect_surfaces(..., near=, radius=)` gives that branch and every other passing well within the
+    radius, each the whole branch with its closedness (a match of a full run's within the tolerance both
+    ways), and none far away."""
+    from scipy.spatial import cKDTree
+
+    rng = np.random.default_rng(seed)
+    n, tol, radius = 8, 1e-3, 2.0
+    knots = np.r_[0, 0, 0, np.linspace(0, 1, n - 2), 1, 1, 1]
+    g = np.stack(np.meshgrid(np.linspace(0, 20, n), np.linspace(0, 20, n), indexing="ij"), axis=2)
+    bumpy = NurbsSurface(3, 3, knots, knots, np.concatenate([g, rng.normal(0, 1.5, (n, n, 1))], axis=2))
+    flat = NurbsSurface(1, 1, [0, 0, 1, 1], [0, 0, 1, 1],
+                        np.array([[[-1, -1, 0], [-1, 21, 0]], [[21, -1, 0], [21, 21, 0]]], float))
+    full = intersect_surfaces(bumpy, flat, tol)
+    if not full:
+        return
+    source = _polyline(full[pick % len(full)])
+    near = source[rng.choice(len(source), 3, replace=False)]
+    some = intersect_surfaces(bumpy, flat, tol, near=near, radius=radius)
+    lines = [_polyline(b) for b in full]
+    reach = np.array([cKDTree(line).query(near)[0].min() for line in lines])
+
+    def matches(b, k):
+        a, c = _polyline(b), lines[k]
+        return (b.closed == full[k].closed and cKDTree(c).query(a)[0].max() <= 3 * tol
+                and cKDTree(a).query(c)[0].max() <= 3 * tol)
+
+    matched = [next((k for k in range(len(full)) if matches(b, k)), None) for b in some]
+    assert None not in matched and len(set(matched)) == len(matched)
+    assert pick % len(full) in matched
+    assert set(np.flatnonzero(reach <= radius / 4)) <= set(matched)   # well within: found
+    assert all(reach[k] <= radius + 2.0 for k in matched)             # none beyond a seed step of the radius
