@@ -39,35 +39,61 @@ def cover_seams(points, patches, gaps, tol: float, near: float, retrim, measure,
     """Patches with the trims of the seams over `tol` that share nothing grown to their neighbours (module
     docstring), and their gaps. `retrim(patch, feet)` -> the patch trimmed to its data and the
     surface parameters `feet` (k, 2) (`rgm.fitters.freeform_part.retrimmed`), or None if no valid trim
-    results; `measure(patches)` -> gaps;
-    `score(gaps)` orders sets of seams. Each seam is tried both ways, the worst seam first; a grown face
-    is kept only if its seams then score better, the better way of the two if both do."""
+    results; `measure(patches)` -> gaps; `score(gaps)` orders sets of seams. Each seam is tried both
+    ways, the worst seam first; a face grown again covers its earlier feet too. A grown face is kept only
+    if its seams then score better, the better way of the two if both do; where growing it breaks another
+    of its seams (at a corner of three faces, its edge now runs past the third face's), that seam is grown
+    next in the same trial (either way), and the two kept together if the faces' seams score better."""
     from rgm.fitters.patches import _twins, boundary_samples
 
-    patches = list(patches)
-    step = near / 10
+    original, patches, covered = list(patches), list(patches), {}
+
+    def grow(patches, covered, sources, b):
+        """(patches, covered) with b's trim grown over the edges of faces `sources` where b's surface passes
+        within `tol`, besides the feet it covers already; None where nothing grows."""
+        xyz = [boundary_samples(patches[a].shape, near / 10) for a in sources]
+        xyz = np.vstack([x[shared < 0] for x, shared in xyz])
+        d = cKDTree(points[patches[b].indices]).query(xyz, distance_upper_bound=2 * near)[0]
+        feet = _feet(patches[b].shape, xyz[np.isfinite(d)], tol)
+        if not len(feet):
+            return None
+        feet = np.vstack([covered.get(b, np.zeros((0, 2))), feet])
+        face = retrim(original[b], feet)
+        return None if face is None else (patches[:b] + [face] + patches[b + 1:], {**covered, b: feet})
+
+    def open_seam(g, patches):
+        return g.max > tol and not g.shared and not _twins(patches, g.i, g.j)
+
+    def better(new, old, faces):
+        return score([h for h in new if {h.i, h.j} & faces]) > score([h for h in old if {h.i, h.j} & faces])
+
     for g in sorted(gaps, key=lambda g: -g.max):
-        if g.max <= tol or g.shared or _twins(patches, g.i, g.j):
-            continue
         current = {(h.i, h.j): h for h in gaps}.get((g.i, g.j))
-        if current is None or current.max <= tol:
+        if current is None or not open_seam(current, patches):
             continue
         best = None
         for b in (g.i, g.j):
             a = g.i + g.j - b
-            xyz, shared = boundary_samples(patches[a].shape, step)
-            d = cKDTree(points[patches[b].indices]).query(xyz, distance_upper_bound=2 * near)[0]
-            feet = _feet(patches[b].shape, xyz[np.isfinite(d) & (shared < 0)], tol)
-            grown = retrim(patches[b], feet) if len(feet) else None
-            if grown is None:
-                continue
-            trial = patches[:b] + [grown] + patches[b + 1:]
-            new = measure(trial)
-            touched = [h for h in new if b in (h.i, h.j)], [h for h in gaps if b in (h.i, h.j)]
-            if score(touched[0]) > score(touched[1]) and (best is None or score(new) > score(best[1])):
-                best = trial, new
+            trials, step = [], grow(patches, covered, [a], b)
+            while step is not None:   # b grown over a's edge; then also over those of its seams left open
+                new = measure(step[0])
+                trials.append((step, new, {b}))
+                rest = [h.i + h.j - b for h in new if b in (h.i, h.j) and h.i + h.j - b != a and open_seam(h, step[0])]
+                step = grow(*step, rest, b) if rest and len(trials) < 2 and not better(new, gaps, {b}) else None
+            if trials and not any(better(new, gaps, {b}) for _, new, _ in trials):
+                # a corner: b's edge now runs past a third face's; each such face grown over b's new edge
+                state, new, _ = max(trials, key=lambda t: score(t[1]))
+                for h in new:
+                    if b in (h.i, h.j) and open_seam(h, state[0]):
+                        c = h.i + h.j - b
+                        second = grow(*state, [b], c)
+                        if second is not None:
+                            trials.append((second, measure(second[0]), {b, c}))
+            for trial, new, faces in trials:
+                if better(new, gaps, faces) and (best is None or score(new) > score(best[1])):
+                    best = trial, new
         if best is not None:
-            patches, gaps = best
+            (patches, covered), gaps = best
     return patches, gaps
 
 
