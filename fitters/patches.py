@@ -432,12 +432,15 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
 def _unclosed(patches: list[PatchFit], gaps: list[Gap], tol: float) -> dict:
     """{(i, j): why} for the shared intersections whose faces' loops would not close as the file reads
     back: the intersection of the printed surfaces (`rgm.fitters.freeform_part.printed_surface`, numbers
-    as written) approximated at `tol`, each face's stretch of it between its neighbouring pieces' ends (as
-    the back ends and `rgmc compile`'s closure check take it), must reach both within `tol`. Where two
-    surfaces nearly touch, marching at the tolerance is sensitive to the last printed digit (the YCB meat
-    can: an open branch in memory, a closed loop from the file, and a loop left open by 29.6 mm)."""
+    as written) approximated at `tol` (as `rgmc compile`'s closure check takes it) and at tol / _FINER (as
+    the STEP back end does where OpenCASCADE's own branch misses the joins), each face's stretch of it
+    between its neighbouring pieces' ends must reach both within `tol`. Where two surfaces nearly touch,
+    marching at the tolerance is sensitive to the last printed digit (the YCB meat can: an open branch in
+    memory, a closed loop from the file, and a loop left open by 29.6 mm), and marching finer may split
+    a branch that the coarser march ran through (a crease whose finer stretch missed its joins by 10.3 mm,
+    which the STEP back end refused)."""
     from rgm.fitters.freeform_part import printed_surface
-    from rgm.fitters.shared_edges import face_stretch
+    from rgm.fitters.shared_edges import _FINER
     from rgm.model import IntersectionCurve
 
     surfaces, out = {}, {}
@@ -447,18 +450,26 @@ def _unclosed(patches: list[PatchFit], gaps: list[Gap], tol: float) -> dict:
         for k in (g.i, g.j):
             if k not in surfaces:
                 surfaces[k] = printed_surface(patches[k].shape)
-        crease = IntersectionCurve(surfaces[g.i], surfaces[g.j], tol)
-        for k, other in ((g.i, g.j), (g.j, g.i)):
-            uv, ends = face_stretch(patches[k].shape, surfaces[k], crease, other)
-            s = surfaces[k].nurbs()
-            miss = float(np.max(np.linalg.norm(s.evaluate(uv[[0, -1], 0], uv[[0, -1], 1])
-                                               - s.evaluate(ends[:, 0], ends[:, 1]), axis=1)))
+        for at in (tol, tol / _FINER):
+            crease = IntersectionCurve(surfaces[g.i], surfaces[g.j], at)
+            miss = max(_join_miss(patches[k].shape, surfaces[k], crease, other) for k, other in ((g.i, g.j), (g.j, g.i)))
             if miss > tol:
-                out[(g.i, g.j)] = (f"on the printed surfaces their intersection misses a join of patch {k + 1} by "
-                                   f"{miss:.2f} mm (the surfaces nearly touch: marching at the tolerance is "
-                                   f"sensitive to the last digit written)")
+                out[(g.i, g.j)] = (f"on the printed surfaces their intersection, approximated at {at:g} mm, misses "
+                                   f"a join by {miss:.2f} mm (the surfaces nearly touch: marching is sensitive to "
+                                   f"the last digit written)")
                 break
     return out
+
+
+def _join_miss(shape, surface, crease, other: int) -> float:
+    """How far (model units) a face's stretch of its shared intersection `crease` with patch `other` ends
+    from the joins it runs between (`rgm.fitters.shared_edges.face_stretch`), on its printed `surface`."""
+    from rgm.fitters.shared_edges import face_stretch
+
+    uv, ends = face_stretch(shape, surface, crease, other)
+    s = surface.nurbs()
+    return float(np.max(np.linalg.norm(s.evaluate(uv[[0, -1], 0], uv[[0, -1], 1]) - s.evaluate(ends[:, 0], ends[:, 1]),
+                                       axis=1)))
 
 
 def _refit_round(points, plain, old_gaps, share, cache, sizes, tol, statistic, max_ctrl, near, spacing,

@@ -106,11 +106,18 @@ def corner_indices(poly: np.ndarray, window: int = 3, angle: float = np.deg2rad(
 
 
 def _densify(poly: np.ndarray, per_edge: int = 4) -> np.ndarray:
-    """An open polyline (k, 2) with `per_edge` evenly spaced points on every edge (k-1) * per_edge + 1,
-    so that a least-squares fit has data in every knot span it may create."""
-    t = np.linspace(0.0, 1.0, per_edge, endpoint=False)
+    """An open polyline (k, 2) with `per_edge` evenly spaced points on every edge, and on an edge over twice
+    the median length (a jump across a stretch with no samples, as where a loop is rebuilt between shared
+    edges) as many as its length holds median edges times `per_edge`, so that a least-squares fit has data
+    in every knot span it may create and cannot swing away between its points."""
     a, b = poly[:-1], poly[1:]
-    pts = (a[:, None, :] + (b - a)[:, None, :] * t[None, :, None]).reshape(-1, 2)
+    length = np.linalg.norm(b - a, axis=1)
+    typical = float(np.median(length)) if len(length) else 0.0
+    long = length > 2 * typical
+    n = np.full(len(length), per_edge)
+    n[long] = np.ceil(per_edge * length[long] / typical).astype(int)
+    t = np.concatenate([np.arange(k) / k for k in n])
+    pts = np.repeat(a, n, axis=0) + t[:, None] * np.repeat(b - a, n, axis=0)
     return np.vstack([pts, poly[-1:]])
 
 
