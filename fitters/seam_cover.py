@@ -41,9 +41,11 @@ def cover_seams(points, patches, gaps, tol: float, near: float, retrim, measure,
     surface parameters `feet` (k, 2) (`rgm.fitters.freeform_part.retrimmed`), or None if no valid trim
     results; `measure(patches)` -> gaps; `score(gaps)` orders sets of seams. Each seam is tried both
     ways, the worst seam first; a face grown again covers its earlier feet too. A grown face is kept only
-    if its seams then score better, the better way of the two if both do; where growing it breaks another
-    of its seams (at a corner of three faces, its edge now runs past the third face's), that seam is grown
-    next in the same trial (either way), and the two kept together if the faces' seams score better."""
+    if its seams then score better, the better way of the two if both do. Where it does not, because other
+    seams of b are left open (at a corner of three faces b's new edge runs past the third face's), the
+    same trial grows b over those neighbours' edges as well, and failing that each such neighbour over b's
+    new edge; the faces grown are kept together if their seams then score better (the YCB mustard
+    bottle's shoulder, noise seed 2: 16 of 16 seams within 1 mm instead of 14)."""
     from rgm.fitters.patches import _twins, boundary_samples
 
     original, patches, covered = list(patches), list(patches), {}

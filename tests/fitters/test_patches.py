@@ -312,7 +312,8 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path, 
     # trimmed face): seed 1 14 of 14 within 1 mm, worst 0.55 mm, 8 shared; seed 2 16 of 16, worst 0.90 mm
     # (14 of 16, worst 1.94 mm, before a face grown to its neighbour at a three-patch corner could cover its
     # other open seams too and have the third face grown over its new edge, rgm.fitters.seam_cover; seeds
-    # 3, 4, 8: 14/14, 16/16, 19/19, before 13/14, 15/16, 19/19); seed 1 19 of 23, worst 2.77 mm, before
+    # 3, 4, 8: 14/14, 14/16 (worst 1.92 mm, where the surfaces part by 1-1.6 mm), 19/19; before 13/14,
+    # 15/16, 19/19); seed 1 19 of 23, worst 2.77 mm, before
     # crease points joined the patch whose plane fitted to 24 smooth points they lie on; 12 of 21
     # before trims were grown to their neighbours, rgm.fitters.seam_cover; 10 of 21 and 6 shared before
     # the refinement split spans beside narrow failing ones and steep pieces tried their halves). Measured
@@ -367,7 +368,9 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
     # Seams measured face to face as written (a boundary sample to the nearest other trimmed face, `g0_gaps`):
-    # 29 of 49 within 1 mm, worst 4.14 mm, 11 shared, their edges within 1 mm (33 of 49, worst 3.95 mm, before a
+    # 29 of 51 within 1 mm, worst 4.24 mm, 13 shared, their edges within 1 mm (29 of 49, worst 4.14 mm, before
+    # a rebuilt loop's long jumps were sampled in proportion, rgm.fitters.trimloops, and the printed
+    # intersection was checked at a tenth of the tolerance too; 33 of 49, worst 3.95 mm, before a
     # face grown at a three-patch corner could cover its other open seams and have the third face grown
     # over its new edge, rgm.fitters.seam_cover: this seed lost 4 while seeds 2-4 gained, 43/75 -> 53/76,
     # 51/79 -> 65/85, 35/57 -> 39/61, worst 2.81-7.83 -> 3.24-4.77 mm; 36 of 54,
@@ -386,7 +389,7 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     # the figures move by machine (floating-point differences steer discrete choices: the segmentation's
     # pieces, the knots inserted): without the extension 37 of 42, worst 1.77 mm, on one; 32 of 41, worst
     # 1.81 mm, on another
-    assert sum(g <= 1.0 for g in gaps) >= 0.55 * len(gaps) and max(gaps) < 5.0   # regression bounds (29 of 49, 4.14 mm)
+    assert sum(g <= 1.0 for g in gaps) >= 0.5 * len(gaps) and max(gaps) < 5.0   # regression bounds (29 of 51, 4.24 mm)
     assert all(g.max < g.before for g in curves)
     assert all(g.why for g in result.gaps if not g.shared)
     text, _ = patches_text(result, 1.0, title="meat can")
