@@ -113,7 +113,7 @@ def _densify(poly: np.ndarray, per_edge: int = 4) -> np.ndarray:
     a, b = poly[:-1], poly[1:]
     length = np.linalg.norm(b - a, axis=1)
     typical = float(np.median(length)) if len(length) else 0.0
-    long = length > 2 * typical
+    long = length > 2 * typical if typical > 0 else np.zeros(len(length), bool)   # (most edges of zero length)
     n = np.full(len(length), per_edge)
     n[long] = np.ceil(per_edge * length[long] / typical).astype(int)
     t = np.concatenate([np.arange(k) / k for k in n])
