@@ -29,7 +29,9 @@ merged views of a closed or wrapped part:
    crease too soft to find divides) is split in two across its longest extent, each half parameterised
    again, to `_RESPLIT` splits; the halves are kept if every one holds (`_fit_piece`). YCB meat can,
    views with seeds 2-4: every patch now holds (before, pieces of the lid's corner did not), and 29-33
-   seams of 40-53 are within 1 mm (20-24 of 34-44 before).
+   seams of 40-53 are within 1 mm (20-24 of 34-44 before). Neighbouring patches that one surface serves
+   (it holds on each side's points, with no more control points than both) are then merged
+   (`rgm.fitters.patch_merge`): a seam between surfaces that part cannot be closed by any trim.
 4. Neighbouring patches share their boundary curve (`rgm.fitters.shared_edges`): the piece of each face's
    trimming loop along the crease with a neighbour becomes the same described intersection,
    `intersect(surface_i, surface_j)`, one binding used by both loops, joined to the rest of each loop
@@ -62,9 +64,9 @@ merged views of a closed or wrapped part:
    set then shared again and kept if it scores better; last on the faces as shared (a face with shared
    edges grows the data stretches between them, `grown_outline`), kept if every sample scores better.
    YCB views at 1 mm (the tests' six views, measured face to face on the loops as written), seams within:
-   mustard bottle, noise seeds 1, 2, 8: 19/23, 17/18, 18/20 (worst 2.77, 1.48, 2.94 mm); potted meat can,
-   seed 1, 36/54 (worst 2.91 mm; seeds 2 and 3: 28/61 and 19/48, as before growing); before the trims were
-   grown (2026-12-06 morning) 12/21, 16/18, 15/19 and 26/49. Measured to the neighbour's untrimmed surface instead (before 2026-12-06) the views of the day
+   mustard bottle, noise seeds 1-11: all (12-16 seams each, worst 0.99 mm); potted meat can, seeds 1-4:
+   23/39, 40/62, 43/72, 38/56 (worst 3.0-4.6 mm); before the trims were grown (2026-12-06 morning) the
+   bottle's seeds 1, 2, 8 read 12/21, 16/18, 15/19 and the can's seed 1 26/49. Measured to the neighbour's untrimmed surface instead (before 2026-12-06) the views of the day
    before read 21/21, 11/12, 18/19 and 36/41: the trims of the cap's and lid's patches stopped 2-4 mm
    short of each other. What stays over: seams "too short on one side to share" at three-patch corners,
    near-tangent surfaces that part by more than the tolerance before they reach the other face, slivers,
@@ -92,6 +94,7 @@ from rgm.fitters.freeform_measure import TrimmedNurbs
 from rgm.fitters.freeform_part import FreeformShape, fit_freeform, fitted_parameters, retrimmed
 from rgm.fitters.normals import pca_normals
 from rgm.fitters.patch_base import Base, Wrap, base_parameters, reach_past
+from rgm.fitters.patch_merge import merge_neighbours
 from rgm.fitters.trimloops import check_loops
 
 __all__ = ["PatchFit", "Gap", "PatchSet", "fit_patches", "seam_anchors", "boundary_samples", "as_written",
@@ -192,6 +195,10 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
         for sub, u, v, base in base_parameters(points[group], own, spacing=spacing):
             patches += _fit_piece(points, group[sub], base, (u, v), tol, statistic, max_ctrl, k, spacing, skipped)
     patches.sort(key=lambda p: -len(p.indices))
+    patches, merged = merge_neighbours(points, patches, lambda idx: fit_one_piece(points, idx, tol, statistic,
+                                                                                 max_ctrl, k, spacing),
+                                       spacing, tol, statistic)
+    skipped += merged
     assigned = sum(len(p.indices) for p in patches)
     gaps = g0_gaps(points, patches, 5 * spacing)
     if share:
@@ -200,6 +207,23 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
     for r, p in enumerate(patches, 1):   # what was done to keep a trim valid (pinches, narrow necks)
         skipped += [f"patch {r} trim: {note}" for note in p.shape.loops.notes]
     return PatchSet(patches, gaps, len(points) - assigned, skipped)
+
+
+def fit_one_piece(points, indices, tol: float, statistic: str, max_ctrl: int, k: int, spacing: float):
+    """A PatchFit of points[indices] parameterised as one piece over its own base (`base_parameters`, the
+    surface reaching 5 spacings past the data), or None when no single open base serves them all (a full
+    wrap, a piece left out or split) or no fit results: how two neighbours' union is tried as one patch
+    (`rgm.fitters.patch_merge`)."""
+    own = pca_normals(points[indices], k)[0]
+    pieces = base_parameters(points[indices], own, spacing=spacing)
+    if len(pieces) != 1 or pieces[0][3].closed or len(pieces[0][0]) != len(indices):
+        return None
+    _, u, v, base = pieces[0]
+    try:
+        return _fit_patch(points, indices, base, reach_past(points[indices], u, v, 5 * spacing), tol, statistic,
+                          max_ctrl)
+    except GeometryError:
+        return None
 
 
 def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, skipped, depth=_RESPLIT) -> list:

@@ -274,7 +274,7 @@ def test_bad_input_gives_clear_errors():
 
 
 @pytest.mark.skipif(not MUSTARD.exists(), reason=f"shared data folder absent: {MUSTARD}")
-@pytest.mark.parametrize("seed", [1, 2])
+@pytest.mark.parametrize("seed", [1, 4])
 def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path, seed):
     """Six scan-like views of the YCB mustard bottle (mm, 1.5 mm pitch, 0.05 mm noise, 2 % outliers
     removed by the statistical filter) -> patches split at the cap and shoulder edges, each a trimmed
@@ -309,7 +309,9 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path, 
     # the bottom, shoulder and cap creases are shared where the surfaces cross (each reaches past its data,
     # so no domain edge clamps the intersection): within the tolerance along the edge; every pair not
     # shared says why. Seams are measured face to face as written (a boundary sample to the nearest other
-    # trimmed face): seed 1 14 of 14 within 1 mm, worst 0.55 mm, 8 shared; seed 2 16 of 16, worst 0.90 mm
+    # trimmed face): seed 1 13 of 13 within 1 mm, worst 0.55 mm, 6 shared; seeds 2-11 13/13, 13/13, 12/12,
+    # 12/12, 12/12, 12/12, 16/16, 12/12, 12/12, 12/12 (worst 0.99 mm), once neighbours one surface serves
+    # were merged (rgm.fitters.patch_merge). Before: seed 1 14 of 14, 8 shared; seed 2 16 of 16, worst 0.90 mm
     # (14 of 16, worst 1.94 mm, before a face grown to its neighbour at a three-patch corner could cover its
     # other open seams too and have the third face grown over its new edge, rgm.fitters.seam_cover; seeds
     # 3, 4, 8: 14/14, 14/16 (worst 1.92 mm, where the surfaces part by 1-1.6 mm), 19/19; before 13/14,
@@ -325,8 +327,10 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path, 
     assert any("closed round its axis" in g.why and not g.shared for g in result.gaps)
     assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     within = sum(g.max <= 1.0 for g in result.gaps)
-    # regression bounds (all here; the figures move with the machine's rounding)
-    assert within >= 0.9 * len(result.gaps) and max(g.max for g in result.gaps) < 1.5
+    # G0: every seam within the tolerance (noise seeds 1-11 all did once neighbours one surface serves were
+    # merged, rgm.fitters.patch_merge: the cap's flat ring came out as two patches whose surfaces parted by
+    # 1-2 mm, and seed 4 read 14 of 16, worst 1.92 mm; before that the bound here was 0.9 of the seams)
+    assert within == len(result.gaps), sorted((round(g.max, 2), g.i, g.j, g.why) for g in result.gaps if g.max > 1.0)
     assert max(g.max for g in shared) < min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
     for g in shared:   # one binding, used by both faces' loops
@@ -368,7 +372,9 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
     # Seams measured face to face as written (a boundary sample to the nearest other trimmed face, `g0_gaps`):
-    # 29 of 51 within 1 mm, worst 4.24 mm, 13 shared, their edges within 1 mm (29 of 49, worst 4.14 mm, before
+    # 23 of 39 within 1 mm, worst 3.79 mm, 7 shared, 13 patches, once neighbours one surface serves were
+    # merged (rgm.fitters.patch_merge; seeds 2-4 40/62, 43/72, 38/56, worst 3.71, 4.57, 3.02 mm); 29 of 51,
+    # worst 4.24 mm, 13 shared, 18 patches before (seeds 2-4 56/77, 58/83, 42/65, worst 3.93-5.21 mm), (29 of 49, worst 4.14 mm, before
     # a rebuilt loop's long jumps were sampled in proportion, rgm.fitters.trimloops, and the printed
     # intersection was checked at a tenth of the tolerance too; 33 of 49, worst 3.95 mm, before a
     # face grown at a three-patch corner could cover its other open seams and have the third face grown
@@ -389,7 +395,7 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     # the figures move by machine (floating-point differences steer discrete choices: the segmentation's
     # pieces, the knots inserted): without the extension 37 of 42, worst 1.77 mm, on one; 32 of 41, worst
     # 1.81 mm, on another
-    assert sum(g <= 1.0 for g in gaps) >= 0.5 * len(gaps) and max(gaps) < 5.0   # regression bounds (29 of 51, 4.24 mm)
+    assert sum(g <= 1.0 for g in gaps) >= 0.5 * len(gaps) and max(gaps) < 5.0   # regression bounds (23 of 39, 3.79 mm)
     assert all(g.max < g.before for g in curves)
     assert all(g.why for g in result.gaps if not g.shared)
     text, _ = patches_text(result, 1.0, title="meat can")
