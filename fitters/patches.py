@@ -677,7 +677,17 @@ def boundary_samples(shape: FreeformShape, step: float) -> tuple[np.ndarray, np.
     """(points (m, 3), shared (m,)): samples on the surface along its outer trimming loop as written (the
     data loop, or where it has shared edges its `outline`), about `step` (model units) apart along it (the
     polygon of the loop, 200 samples a data piece, resampled by arc length, linearly in (u, v) between its
-    vertices), and the patch each sample's piece is shared with (-1: a data piece)."""
+    vertices), and the patch each sample's piece is shared with (-1: a data piece); made once per shape
+    and step, as `written_face` is."""
+    memo = shape.__dict__.setdefault("_boundary_samples", {})
+    if step not in memo:
+        memo[step] = _boundary_samples(shape, step)
+        for a in memo[step]:
+            a.setflags(write=False)
+    return memo[step]
+
+
+def _boundary_samples(shape: FreeformShape, step: float) -> tuple[np.ndarray, np.ndarray]:
     loops, shared = _written_loops(shape)
     uv = np.vstack([loops[0], loops[0][:1]])
     s = shape.nurbs()
@@ -724,14 +734,14 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int | None =
     label = np.full(len(points), -1)
     for r, p in enumerate(patches):
         label[p.indices] = r
-    trees = [cKDTree(points[p.indices]) for p in patches]
+    trees, outside = _searches(points, patches, label)
     chosen = []                     # (i, j, samples (k, 3)): the samples of seam (i, j) on face i
     for i, p in enumerate(patches):
-        others = np.nonzero((label >= 0) & (label != i))[0]
+        others = outside[i][0]
         if len(others) == 0:
             continue
         samples, shared = boundary_samples(p.shape, near / 10 if step is None else step)
-        d, j = cKDTree(points[others]).query(samples, distance_upper_bound=near, workers=-1)
+        d, j = outside[i][1].query(samples, distance_upper_bound=near, workers=-1)
         hit = np.isfinite(d) & (shared < 0)   # a shared edge's samples lie on that seam (measured along it)
         owner = label[others[j[hit]]]
         for o in np.unique(owner):
@@ -750,15 +760,60 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int | None =
         near_o = np.flatnonzero(np.isfinite(trees[o].query(x, distance_upper_bound=near, workers=-1)[0])
                                 & (on != o) & ~twin)
         if len(near_o):
-            gap[near_o] = np.minimum(gap[near_o], written_face(q.shape).distance(x[near_o]))
+            gap[near_o] = np.minimum(gap[near_o], _face_distances(q.shape, x[near_o], on[near_o]))
     seams: dict[tuple[int, int], list[np.ndarray]] = {}
     for (i, o, seam), d in zip(chosen, np.split(gap, np.cumsum([len(c[2]) for c in chosen])[:-1])):
-        if _twins(patches, i, o):
-            d = patches[o].shape.distance(seam)
+        if _twins(patches, i, o):   # to the other face's surface, remembered as `_face_distances` are
+            memo = patches[o].shape.__dict__.setdefault("_surface_distances", {})
+            key = seam.tobytes()
+            if key not in memo:
+                memo[key] = patches[o].shape.distance(seam)
+                memo[key].setflags(write=False)
+            d = memo[key]
         seams.setdefault((min(i, o), max(i, o)), []).append(d)
     return [Gap(int(i), int(j), float(np.max(np.concatenate(d))), float(np.percentile(np.concatenate(d), 95)),
                 sum(map(len, d)), why=_CLOSED if _twins(patches, i, j) else "")
             for (i, j), d in sorted(seams.items())]
+
+
+_SEARCH: dict = {}   # the k-d trees of the last partition `g0_gaps` measured (`_searches`)
+
+
+def _searches(points: np.ndarray, patches: list[PatchFit], label: np.ndarray):
+    """([tree of each patch's points], [(indices of the points outside patch r, their tree)]) for
+    `patches` of points (n, 3), `label` (n,) the patch of each point: kept for the last set of patches'
+    points, which every measurement of a fit after the merge shares (a few hundred of them on the YCB
+    meat can, 40 ms each to build)."""
+    key = (points.tobytes(), tuple(p.indices.tobytes() for p in patches))
+    if key not in _SEARCH:
+        _SEARCH.clear()
+        outside = []
+        for r in range(len(patches)):
+            others = np.nonzero((label >= 0) & (label != r))[0]
+            outside.append((others, cKDTree(points[others]) if len(others) else None))
+        _SEARCH[key] = [cKDTree(points[p.indices]) for p in patches], outside
+    return _SEARCH[key]
+
+
+def _face_distances(shape: FreeformShape, x: np.ndarray, source: np.ndarray) -> np.ndarray:
+    """Distances (k,) of samples x (k, 3) (of the faces `source` (k,)) to the face `shape` as written,
+    remembered with the shape per source face's samples: the seams are measured again for every trial
+    of `rgm.fitters.seam_cover` and refit round, and mostly only one or two faces changed (a shape is
+    not changed once made; a face's samples are the same while it is). Each point's distance does not
+    depend on the others measured with it, so the figures are those of one call on all of them."""
+    memo = shape.__dict__.setdefault("_face_distances", {})
+    groups = [np.flatnonzero(source == i) for i in np.unique(source)]
+    keys = [x[rows].tobytes() for rows in groups]
+    todo = [rows for rows, key in zip(groups, keys) if key not in memo]
+    if todo:
+        fresh = written_face(shape).distance(x[np.concatenate(todo)])
+        for rows, d in zip(todo, np.split(fresh, np.cumsum([len(r) for r in todo])[:-1])):
+            memo[x[rows].tobytes()] = d
+            d.setflags(write=False)
+    out = np.empty(len(x))
+    for rows, key in zip(groups, keys):
+        out[rows] = memo[key]
+    return out
 
 
 def _wrap_pairs(patches: list[PatchFit]) -> list[tuple[int, int]]:
