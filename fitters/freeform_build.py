@@ -52,13 +52,14 @@ def _describe(shape, parameterisation: str, points: int, seconds: float) -> dict
             "seconds": float(seconds)}
 
 
-def _grid_patches(points, idx, grid, tol, statistic, min_pixels) -> FreeformPart | None:
+def _grid_patches(points, idx, grid, tol, statistic, min_pixels, crease_deg=None) -> FreeformPart | None:
     mask = np.isin(grid, idx)
     if mask.sum() < 16:
         return None
     xyz = np.full(grid.shape + (3,), np.nan)
     xyz[grid >= 0] = points[grid[grid >= 0]]
-    masks = split_patches(xyz, mask, min_pixels=min_pixels) or [mask]
+    masks = split_patches(xyz, mask, min_pixels=min_pixels,
+                          **({} if crease_deg is None else {"crease_deg": crease_deg})) or [mask]
     out = FreeformPart()
     for m in masks:
         rows, cols = np.nonzero(m.any(axis=1))[0], np.nonzero(m.any(axis=0))[0]
@@ -79,18 +80,21 @@ def _grid_patches(points, idx, grid, tol, statistic, min_pixels) -> FreeformPart
 
 
 def fit_freeform_part(points, idx, tol: float, *, statistic: str = "p95", grid=None,
-                      min_pixels: int = 50) -> FreeformPart:
+                      min_pixels: int = 50, crease_deg: float | None = None) -> FreeformPart:
     """Trimmed NURBS patches for the part `idx` (indices into points (n, 3), mm) whose `statistic` of the
     residuals is within `tol` (mm). `grid` (rows, cols): the range image behind `points`, if they are one
-    view; patches of fewer than `min_pixels` pixels are left out. Scattered data go to `fit_patches`."""
+    view; patches of fewer than `min_pixels` pixels are left out. Scattered data go to `fit_patches`.
+    `crease_deg`: the normal change (degrees) at which the data splits into patches (None: each splitter's
+    default, 40 for a range view, 35 for scattered points)."""
     from rgm.fitters.patches import fit_patches
 
     idx = np.asarray(idx)
     if grid is not None:
-        part = _grid_patches(points, idx, grid, tol, statistic, min_pixels)
+        part = _grid_patches(points, idx, grid, tol, statistic, min_pixels, crease_deg)
         if part is not None and part.shapes:
             return part
-    return patch_part(fit_patches(points[idx], tol, statistic=statistic))
+    return patch_part(fit_patches(points[idx], tol, statistic=statistic,
+                                  **({} if crease_deg is None else {"angle_deg": crease_deg})))
 
 
 def patch_part(result) -> FreeformPart:

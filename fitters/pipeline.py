@@ -141,12 +141,14 @@ def _snap(shape, part, name, suffix, pts, tol, statistic):
     return part, {"rejected": snapped, "why": f"snapped, the {statistic} would be {cert.value:.4f} mm > tol {tol:g}"}
 
 
-def _freeform_parts(points, idx, grid, name, suffix, tol, statistic):
-    """Emitted trimmed-NURBS patches of one part, their report entries and notes."""
+def _freeform_parts(points, idx, grid, name, suffix, tol, statistic, crease_deg=None):
+    """Emitted trimmed-NURBS patches of one part, their report entries and notes (`crease_deg`: the
+    splitters' crease angle, None for their defaults)."""
     from rgm.fitters.freeform_build import fit_freeform_part
     from rgm.fitters.freeform_part import emit_freeform_set
 
-    ff = fit_freeform_part(points, idx, tol, statistic=statistic, grid=grid, min_pixels=SPECK_PIXELS)
+    ff = fit_freeform_part(points, idx, tol, statistic=statistic, grid=grid, min_pixels=SPECK_PIXELS,
+                           crease_deg=crease_deg)
     single = len(ff.shapes) == 1
     count = range(1, len(ff.shapes) + 1)
     parts = emit_freeform_set(ff.shapes, [name if single else f"{name}_{r}" for r in count],
@@ -168,10 +170,11 @@ def _beyond_its_points(entry: dict, cert) -> str:
 
 
 def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), options=None, stages=None,
-               seed: int = 0, title: str = "part", grid=None) -> FitResult:
+               seed: int = 0, title: str = "part", grid=None, crease_deg: float | None = None) -> FitResult:
     """Fit already filtered, registered points (n, 3) in mm: split, classify, build, certify, emit.
     `grid` (rows, cols) int: when the points are one range view, the index of each pixel's point (-1 where
-    it has none); free-form parts are then parameterised by it."""
+    it has none); free-form parts are then parameterised by it. `crease_deg`: the normal change (degrees)
+    at which free-form data splits into patches (None: 35 for scattered points, 40 for a range view)."""
     from rgm.fitters.certificate import certify, nearest_part, surface_coverage
     from rgm.fitters.classify import classify, spacing as point_spacing, split_parts
     from rgm.fitters.emit import annotations, write_rgm
@@ -225,7 +228,7 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
         free = [(cls, entry, pool, title + tag, tag)]
     for cls, entry, idx, name, suffix in free:
         with stages("free form"):
-            patches, infos, ff_notes = _freeform_parts(points, idx, grid, name, suffix, tol, statistic)
+            patches, infos, ff_notes = _freeform_parts(points, idx, grid, name, suffix, tol, statistic, crease_deg)
         notes += ff_notes
         entry.update(model="free_form", patches=infos)
         emitted += patches
@@ -297,7 +300,8 @@ def filtered_points(scans, scale: float = 1.0):
 
 
 def fit_scans(paths, *, tol: float, poses=None, statistic: str = "p95", register: bool = False,
-              scale: float = 1.0, progress: bool = True, title: str | None = None) -> FitResult:
+              scale: float = 1.0, progress: bool = True, title: str | None = None,
+              crease_deg: float | None = None) -> FitResult:
     """The whole pipeline from scan files.  `scale` converts the scans' units to mm (1000 for metres).
     Views are taken to be in one frame (their poses from `poses` or a .conf) unless `register`, which
     runs `rgm.fitters.register.register_views` (from those poses when given) and leaves out failed views."""
@@ -322,8 +326,10 @@ def fit_scans(paths, *, tol: float, poses=None, statistic: str = "p95", register
         raise ScanError(f"{len(points)} points left after filtering: too few to fit a part")
     options = {"tol": f"{tol:g}", "statistic": statistic, "scale": f"{scale:g}", "register": register,
                "poses": str(poses) if poses else "none"}
+    if crease_deg is not None:
+        options["crease_angle"] = f"{crease_deg:g}"
     result = fit_points(points, tol=tol, statistic=statistic, sources=sources, options=options, stages=stages,
-                        title=title or "part", grid=grid)
+                        title=title or "part", grid=grid, crease_deg=crease_deg)
     result.report["filtered_out"] = removed
     if registration:
         result.report["registration"] = registration

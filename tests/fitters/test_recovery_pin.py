@@ -97,6 +97,14 @@ def test_fit_refuses_to_overwrite_without_force(fitted_pin, capsys):
     assert main(["fit", views[0], "--tol", "0.1", "-o", views[0], "--force"]) == 1
 
 
+def test_fit_refuses_a_crease_angle_outside_0_90(fitted_pin, capsys):
+    _, views, out, _, _ = fitted_pin
+    for bad in ("0", "95"):
+        assert main(["fit", *views, "--tol", "0.1", "-o", str(out.with_name("bad.rgm")), "--crease-angle", bad]) == 1
+        assert "--crease-angle must lie between 0 and 90 degrees" in capsys.readouterr().err
+    assert not out.with_name("bad.rgm").exists()
+
+
 def test_fit_never_writes_a_file_the_checker_rejects(tmp_path, monkeypatch, capsys):
     """A fitter bug (here: text revolving a length) is reported with the checker's diagnostics, and
     nothing is written."""
