@@ -10,7 +10,10 @@ merged views of a closed or wrapped part:
    joined by a k-nearest graph (8 neighbours within a few point spacings, normals agreeing) into components
    (`scipy.sparse.csgraph.connected_components`); small components are dropped and each crease point then
    joins the patch on whose local tangent plane it lies, so neighbouring patches meet at the crease
-   itself and no point of one face is pulled into its neighbour.
+   itself and no point of one face is pulled into its neighbour. A group whose fits (3.) hold their
+   statistic yet miss some points by `_MISSED_EDGE` tolerances has an edge rounded too softly for
+   `angle_deg` (the YCB cracker box's four long faces, 13.5 mm off at the edges): it is split again at
+   `_SOFT_CREASE` degrees, kept if every piece holds and the worst miss shrinks.
 2. Parameterisation by projection onto a base surface (`rgm.fitters.patch_base`): the best-fit plane when
    the patch is disc-like (every normal within `max_angle` of the plane normal: the projection is then
    one-to-one), otherwise a
@@ -111,6 +114,8 @@ _ANCHOR_TOL = 0.25      # anchors are met within this share of the seam toleranc
 _ROUNDS = 3              # anchored refit rounds at most (`_share_and_refit`)
 _RESPLIT = 2             # a piece no surface fits is split in halves at most this deep (`_fit_piece`)
 _DENSE = 8               # a fit with a control point per fewer data points than this tries halves too (`_fit_piece`)
+_MISSED_EDGE = 10        # a group whose fits miss a point by this many tolerances is split again (`fit_patches`)
+_SOFT_CREASE = 20.0      # at this crease angle (degrees)
 
 
 # ---------------------------------------------------------------------------------------- fitting
@@ -189,11 +194,30 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
     normals = unit_rows(np.asarray(normals, float))
     groups = split_scattered(points, normals, angle_deg=angle_deg, k=k)
     patches, skipped = [], []
-    for group in groups:
+
+    def fitted(group):
         # normals from the patch's own points: the crease band's normals no longer mix both sides
         own = pca_normals(points[group], k)[0]
-        for sub, u, v, base in base_parameters(points[group], own, spacing=spacing):
-            patches += _fit_piece(points, group[sub], base, (u, v), tol, statistic, max_ctrl, k, spacing, skipped)
+        return [fit for sub, u, v, base in base_parameters(points[group], own, spacing=spacing)
+                for fit in _fit_piece(points, group[sub], base, (u, v), tol, statistic, max_ctrl, k, spacing,
+                                      skipped)]
+
+    for group in groups:
+        fits = fitted(group)
+        worst = max((f.shape.fit.stats.max for f in fits), default=0.0)
+        if worst > _MISSED_EDGE * tol and angle_deg > _SOFT_CREASE:
+            # a fit that holds its statistic yet misses points by _MISSED_EDGE tolerances has rounded off an
+            # edge too soft for the crease angle: the group split again at _SOFT_CREASE, kept if every piece
+            # holds and the worst miss shrinks
+            finer = split_scattered(points[group], normals[group], angle_deg=_SOFT_CREASE, k=k)
+            again = [f for sub in finer for f in fitted(group[sub])] if len(finer) > 1 else []
+            if again and all(f.shape.fit.stats.holds for f in again) and \
+                    max(f.shape.fit.stats.max for f in again) < worst:
+                skipped.append(f"{len(group)} points fitted {worst:.3g} mm off at worst as {len(fits)} patch(es) "
+                               f"(an edge softer than {angle_deg:g} degrees): split at {_SOFT_CREASE:g} degrees "
+                               f"into {len(again)}, {max(f.shape.fit.stats.max for f in again):.3g} mm off at worst")
+                fits = again
+        patches += fits
     patches.sort(key=lambda p: -len(p.indices))
     patches, merged = merge_neighbours(points, patches, lambda idx: fit_one_piece(points, idx, tol, statistic,
                                                                                  max_ctrl, k, spacing),
