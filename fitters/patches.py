@@ -195,29 +195,32 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
     groups = split_scattered(points, normals, angle_deg=angle_deg, k=k)
     patches, skipped = [], []
 
-    def fitted(group):
-        # normals from the patch's own points: the crease band's normals no longer mix both sides
-        own = pca_normals(points[group], k)[0]
-        return [fit for sub, u, v, base in base_parameters(points[group], own, spacing=spacing)
-                for fit in _fit_piece(points, group[sub], base, (u, v), tol, statistic, max_ctrl, k, spacing,
-                                      skipped)]
+    def fitted(groups):   # (fits, notes) of groups of points, each parameterised and fitted (3.)
+        fits, notes = [], []
+        for group in groups:
+            # normals from the patch's own points: the crease band's normals no longer mix both sides
+            own = pca_normals(points[group], k)[0]
+            for sub, u, v, base in base_parameters(points[group], own, spacing=spacing):
+                fits += _fit_piece(points, group[sub], base, (u, v), tol, statistic, max_ctrl, k, spacing, notes)
+        return fits, notes
 
     for group in groups:
-        fits = fitted(group)
+        fits, notes = fitted([group])
         worst = max((f.shape.fit.stats.max for f in fits), default=0.0)
         if worst > _MISSED_EDGE * tol and angle_deg > _SOFT_CREASE:
             # a fit that holds its statistic yet misses points by _MISSED_EDGE tolerances has rounded off an
             # edge too soft for the crease angle: the group split again at _SOFT_CREASE, kept if every piece
-            # holds and the worst miss shrinks
+            # holds and the worst miss shrinks (the notes are those of the fits kept)
             finer = split_scattered(points[group], normals[group], angle_deg=_SOFT_CREASE, k=k)
-            again = [f for sub in finer for f in fitted(group[sub])] if len(finer) > 1 else []
+            again, said = fitted([group[sub] for sub in finer]) if len(finer) > 1 else ([], [])
             if again and all(f.shape.fit.stats.holds for f in again) and \
                     max(f.shape.fit.stats.max for f in again) < worst:
-                skipped.append(f"{len(group)} points fitted {worst:.3g} mm off at worst as {len(fits)} patch(es) "
-                               f"(an edge softer than {angle_deg:g} degrees): split at {_SOFT_CREASE:g} degrees "
-                               f"into {len(again)}, {max(f.shape.fit.stats.max for f in again):.3g} mm off at worst")
+                notes = said + [f"{len(group)} points fitted {worst:.3g} mm off at worst as {len(fits)} patch(es) "
+                                f"(an edge softer than {angle_deg:g} degrees): split at {_SOFT_CREASE:g} degrees "
+                                f"into {len(again)}, {max(f.shape.fit.stats.max for f in again):.3g} mm off at worst"]
                 fits = again
         patches += fits
+        skipped += notes
     patches.sort(key=lambda p: -len(p.indices))
     patches, merged = merge_neighbours(points, patches, lambda idx: fit_one_piece(points, idx, tol, statistic,
                                                                                  max_ctrl, k, spacing),
