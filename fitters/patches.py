@@ -706,12 +706,19 @@ def boundary_samples(shape: FreeformShape, step: float) -> tuple[np.ndarray, np.
     polygon of the loop, 200 samples a data piece, resampled by arc length, linearly in (u, v) between its
     vertices), and the patch each sample's piece is shared with (-1: a data piece); made once per shape
     and step, as `written_face` is."""
-    memo = shape.__dict__.setdefault("_boundary_samples", {})
-    if step not in memo:
-        memo[step] = _boundary_samples(shape, step)
-        for a in memo[step]:
+    return _remembered(shape, "_boundary_samples", step, lambda: _boundary_samples(shape, step))
+
+
+def _remembered(shape: FreeformShape, kind: str, key, compute):
+    """compute(), a tuple of arrays or an array, made once per shape and `key` and kept with the shape (a
+    shape is not changed once made: sharing makes new ones), read-only."""
+    memo = shape.__dict__.setdefault(kind, {})
+    if key not in memo:
+        value = compute()
+        for a in value if isinstance(value, tuple) else (value,):
             a.setflags(write=False)
-    return memo[step]
+        memo[key] = value
+    return memo[key]
 
 
 def _boundary_samples(shape: FreeformShape, step: float) -> tuple[np.ndarray, np.ndarray]:
@@ -791,12 +798,8 @@ def g0_gaps(points, patches: list[PatchFit], near: float, per_seam: int | None =
     seams: dict[tuple[int, int], list[np.ndarray]] = {}
     for (i, o, seam), d in zip(chosen, np.split(gap, np.cumsum([len(c[2]) for c in chosen])[:-1])):
         if _twins(patches, i, o):   # to the other face's surface, remembered as `_face_distances` are
-            memo = patches[o].shape.__dict__.setdefault("_surface_distances", {})
-            key = seam.tobytes()
-            if key not in memo:
-                memo[key] = patches[o].shape.distance(seam)
-                memo[key].setflags(write=False)
-            d = memo[key]
+            d = _remembered(patches[o].shape, "_surface_distances", seam.tobytes(),
+                            lambda: patches[o].shape.distance(seam))
         seams.setdefault((min(i, o), max(i, o)), []).append(d)
     return [Gap(int(i), int(j), float(np.max(np.concatenate(d))), float(np.percentile(np.concatenate(d), 95)),
                 sum(map(len, d)), why=_CLOSED if _twins(patches, i, j) else "")

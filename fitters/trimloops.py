@@ -116,7 +116,8 @@ def _densify(poly: np.ndarray, per_edge: int = 4) -> np.ndarray:
     long = length > 2 * typical if typical > 0 else np.zeros(len(length), bool)   # (most edges of zero length)
     n = np.full(len(length), per_edge)
     n[long] = np.ceil(per_edge * length[long] / typical).astype(int)
-    t = np.concatenate([np.arange(k) / k for k in n])
+    first = np.repeat(np.cumsum(n) - n, n)                        # each point's edge's first point
+    t = (np.arange(n.sum()) - first) / np.repeat(n, n)            # j / n on every edge, without a loop
     pts = np.repeat(a, n, axis=0) + t[:, None] * np.repeat(b - a, n, axis=0)
     return np.vstack([pts, poly[-1:]])
 
