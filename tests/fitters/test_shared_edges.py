@@ -227,3 +227,38 @@ def test_the_corner_of_three_surfaces_is_where_three_planes_meet(seed):
     found = _triple_point(planes, corner + rng.uniform(-3, 3, 3), 0.01)
     exact = np.linalg.solve(normals, np.einsum("ij,j->i", normals, corner))
     assert found is not None and np.linalg.norm(found - exact) < 1e-9 * 100
+
+
+@settings(max_examples=150, deadline=None)
+@given(data=st.data())
+def test_a_failing_loop_drops_the_fewest_seams_and_of_those_keeps_the_most_shared(data):
+    """`_fewest_to_drop`: against a brute-force search, for random candidate sets (run lengths) and a
+    random family of the subsets whose loop rebuilds: the dropped set is one of the smallest that make the
+    loop rebuild and, of those, leaves the most run samples shared; all suspects when none does."""
+    from itertools import combinations
+    from types import SimpleNamespace
+
+    import rgm.fitters.shared_edges as se
+
+    n = data.draw(st.integers(1, 5))
+    mine = [SimpleNamespace(i=0, j=t + 1, runs={0: SimpleNamespace(idx=np.arange(data.draw(st.integers(6, 90))))})
+            for t in range(n)]
+    valid = {frozenset(s) for s in data.draw(st.lists(st.frozensets(st.integers(0, n - 1), max_size=n - 1), max_size=12))}
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(se, "rebuild_loop", lambda k, shape, loop, keep, *a: (
+            "fails" if frozenset(c.j - 1 for c in keep) not in valid else ([], None, None)))
+        got = se._fewest_to_drop(0, None, None, mine, mine, 1e-3, 1.0)
+    best = None
+    for size in range(1, n):
+        ok = [d for d in combinations(range(n), size) if frozenset(set(range(n)) - set(d)) in valid]
+        if ok:
+            best = ok
+            break
+    if best is None:
+        assert sorted(got) == [(0, t + 1) for t in range(n)]
+        return
+    dropped = {j - 1 for _, j in got}
+    assert tuple(sorted(dropped)) in best
+    kept = lambda d: sum(len(mine[t].runs[0].idx) for t in range(n) if t not in d)   # noqa: E731
+    assert kept(dropped) == max(kept(set(d)) for d in best)
+
