@@ -45,11 +45,11 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
    off), drops the fewest shared edges without which that face's loop is valid (of as few, those that
    leave the most of its loop shared), or else all of them (and the neighbours' loops are rebuilt). A
    bound on the change of the trimmed area refused thin faces (a rim's sliver, a strip between two
-   creases) whose sides rightly move out by a few spacings onto their creases: with it, the YCB potted meat can had 147 of 182 seams within 1 mm over four view
-   sets (worst 3.52 mm), with the band 154 of 183 (worst 2.33 mm), both measured on the data loops; over
-   four more, 177 of 214 and 179 of 212. The new loop, densely sampled, is kept with the face
-   (`FreeformShape.outline`): the seams it does not share are measured on it
-   (`rgm.fitters.patches.as_written`).
+   creases) whose sides rightly move out by a few spacings onto their creases: with it, the YCB potted
+   meat can had 147 of 182 seams within 1 mm over four view sets (worst 3.52 mm), with the band 154 of
+   183 (worst 2.33 mm), both measured on the data loops; over four more, 177 of 214 and 179 of 212. The
+   new loop, densely sampled, is kept with the face (`FreeformShape.outline`): the seams it does not
+   share are measured on it (`rgm.fitters.patches.as_written`).
 4. Measurement (`measure_shared`): as the back ends see it, the model objects are built (the surfaces,
    one `IntersectionCurve` of both at the model tolerance, the loops) and each face's piece is the
    stretch of the approximated branch between its neighbouring pieces' ends
