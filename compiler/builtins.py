@@ -168,7 +168,7 @@ _OPT = "none"
 ANNOTATIONS: dict[str, Builtin] = {b.name: b for b in (
     _annotation("fit", (_p("points", INT, _OPT), _p("max", LENGTH, _OPT), _p("rms", LENGTH, _OPT),
                         _p("p95", LENGTH, _OPT), _p("tol", LENGTH, _OPT), _p("coverage", NUM, _OPT),
-                        _p("statistic", STR, _OPT)), None),
+                        _p("statistic", STR, _OPT), _p("g0", LENGTH, _OPT)), None),
     _annotation("classified", (_p("as", STR, _OPT), _p("confidence", NUM, _OPT), _p("runner_up", STR, _OPT)),
                 NUM),
     _annotation("source", (_p("scans", list_of(STR), _OPT), _p("sha256", list_of(STR), _OPT)),

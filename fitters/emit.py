@@ -338,9 +338,11 @@ def emit_part(shape, name: str, suffix: str = "", *, snap: float = 0.0) -> Emitt
     raise TypeError(f"no emitter for {type(shape).__name__}")
 
 
-def annotations(classification, certificate, sources, stopped: str = "") -> list[str]:
+def annotations(classification, certificate, sources, stopped: str = "", g0: float | None = None) -> list[str]:
     """@source, @classified and @fit lines for an exported binding; when the fit's refinement `stopped`
-    short of the tolerance, a comment saying why comes first (the @fit annotation has no field for it)."""
+    short of the tolerance, a comment saying why comes first (the @fit annotation has no field for it).
+    `g0`: the largest gap (mm) at the face's seams with its neighbours, as `rgm.fitters.seam_check`
+    measures the written faces (None: no seam measured)."""
     out = [f"# refinement stopped: {stopped}"] if stopped else []
     if sources:
         names = ", ".join(f'"{s}"' for s, _ in sources)
@@ -354,7 +356,8 @@ def annotations(classification, certificate, sources, stopped: str = "") -> list
     if certificate is not None:
         c = certificate
         out.append(f"@fit(points: {c.points}, max: {c.max:.4f}mm, rms: {c.rms:.4f}mm, p95: {c.p95:.4f}mm, "
-                   f'tol: {c.tol:g}mm, coverage: {min(max(c.coverage, 0.0), 1.0):.3f}, statistic: "{c.statistic}")')
+                   f'tol: {c.tol:g}mm, coverage: {min(max(c.coverage, 0.0), 1.0):.3f}, statistic: "{c.statistic}"'
+                   + ("" if g0 is None else f", g0: {g0:.4f}mm") + ")")
     return out
 
 

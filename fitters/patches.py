@@ -722,13 +722,11 @@ def _remembered(shape: FreeformShape, kind: str, key, compute):
 
 
 def _boundary_samples(shape: FreeformShape, step: float) -> tuple[np.ndarray, np.ndarray]:
+    from rgm.fitters.seam_check import edge_samples
+
     loops, shared = _written_loops(shape)
-    uv = np.vstack([loops[0], loops[0][:1]])
-    s = shape.nurbs()
-    along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(s.evaluate(uv[:, 0], uv[:, 1]), axis=0), axis=1))]
-    t = np.linspace(0.0, along[-1], max(int(along[-1] / step), 16), endpoint=False)
-    segment = np.clip(np.searchsorted(along, t, side="right") - 1, 0, len(shared) - 1)
-    return s.evaluate(np.interp(t, along, uv[:, 0]), np.interp(t, along, uv[:, 1])), shared[segment]
+    xyz, segment, _ = edge_samples(shape.nurbs(), loops[0], step)
+    return xyz, shared[segment]
 
 
 def as_written(points, patches: list[PatchFit], gaps: list[Gap], near: float, **sampling) -> list[Gap]:

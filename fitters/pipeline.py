@@ -235,7 +235,7 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
         owners += [(cls, info, info["stopped"]) for info in infos]
     with stages("certify"):
         owner, dist = nearest_part([p.ideal for p in emitted], points)
-        certificates, kept = [], []
+        certificates, kept = [], {}
         for k, (part, (cls, entry, stopped)) in enumerate(zip(emitted, owners)):
             if not np.any(owner == k):     # wholly behind its neighbours: nothing to certify it with
                 notes.append(f"{part.name}: no point lies nearest to it; left out")
@@ -245,18 +245,35 @@ def fit_points(points, *, tol: float, statistic: str = "p95", sources=(), option
             cert = certify(dist[owner == k], tol, statistic=statistic, coverage=cov)
             if not cert.holds and not stopped and "residual" in entry:   # a patch whose own fit held
                 stopped = entry["stopped"] = _beyond_its_points(entry, cert)
-            part.annotations = annotations(cls, cert, list(sources), stopped)
             entry["certificate"] = cert.as_dict()
             certificates.append(cert)
-            kept.append(part)
-        emitted = kept
+            kept[k] = (cls, cert, stopped)
+        seams, g0 = _written_seams(emitted, kept, owner, points, pitch)
+        for k, (cls, cert, stopped) in kept.items():
+            emitted[k].annotations = annotations(cls, cert, list(sources), stopped, g0.get(k))
+        emitted = [emitted[k] for k in kept]
     with stages("emit"):
         text = write_rgm(emitted, inputs=list(sources), options=options or {"tol": tol, "statistic": statistic},
                          tol=tol, notes=notes, title=title)
     report = {"inputs": [{"path": p, "sha256": h} for p, h in sources], "options": options or {},
-              "points": int(len(points)), "spacing": pitch, "parts": report_parts, "notes": notes,
+              "points": int(len(points)), "spacing": pitch, "parts": report_parts, "notes": notes, "seams": seams,
               "timings": stages.times}
     return FitResult(text, report, emitted, certificates)
+
+
+def _written_seams(emitted, kept, owner, points, pitch) -> tuple[list[dict], dict]:
+    """([{"a", "b": part names, "max", "p95": mm, "samples"}], {part index: its largest seam gap}): the
+    seams between the trimmed faces kept (`rgm.fitters.seam_check`, on the faces as printed, with the
+    points' owners as `rgmc verify` finds them), for the report and the `@fit` annotations' `g0`."""
+    from rgm.fitters.freeform_measure import TrimmedNurbs
+    from rgm.fitters.seam_check import measure_seams, worst_per_face
+
+    faces = {k: emitted[k].ideal for k in kept if isinstance(emitted[k].ideal, TrimmedNurbs)}
+    if len(faces) < 2:
+        return [], {}
+    seams = measure_seams(faces, points, owner, pitch)
+    return ([{"a": emitted[s.a].name, "b": emitted[s.b].name, "max": s.max, "p95": s.p95, "samples": s.samples}
+             for s in seams], worst_per_face(seams))
 
 
 def _view_cells(scans):

@@ -103,6 +103,12 @@ def run(args) -> int:
                       file=sys.stderr)
     for note in result.report["notes"]:
         print(f"rgmc fit: note: {note}", file=sys.stderr)
+    seams = result.report.get("seams", [])
+    if seams:   # as `rgmc verify` measures the file: each face's edges to its neighbours' faces
+        tol = float(args.tol)
+        worst = max(seams, key=lambda s: s["max"])
+        print(f"seams: {sum(s['max'] <= tol for s in seams)} of {len(seams)} within tol {tol:g} mm (G0, face to face "
+              f"as written); worst {worst['max']:.4f} mm, {worst['a']} | {worst['b']}", file=sys.stderr)
     print(f"wrote {out}", file=sys.stderr)
     return 0 if result.parts else 1
 

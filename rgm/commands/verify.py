@@ -7,8 +7,11 @@ and filtered as `rgmc fit` does, each point is given to the nearest annotated pa
 (`rgm.fitters.certificate.nearest_part`, as `rgmc fit` certifies), and the certificate is measured again
 with the tolerance and statistic written in the annotation.  A certificate that did not
 hold when fitted (its recorded figure above its tolerance, as on a bulging carton fitted as a box) must
-not get worse: none of its recorded max, rms and p95 may grow by more than 5 % of the tolerance.  Exit codes: 0 every certificate holds, 1 one does not (after a hand edit,
-say) or the input is bad, 2 usage.
+not get worse: none of its recorded max, rms and p95 may grow by more than 5 % of the tolerance.  The
+seams between trimmed faces are measured too, from the file (`rgm.fitters.seam_check`: each face's edges
+to its neighbours' faces as written), and held to the same rule against the `g0` the fit recorded.
+Exit codes: 0 every certificate and seam holds, 1 one does not (after a hand edit, say) or the input is
+bad, 2 usage.
 """
 from __future__ import annotations
 
@@ -54,8 +57,10 @@ def _fit_annotations(program) -> dict:
             statistic = stat.value if isinstance(stat, A.String) else "max"
             recorded = {key: ann.arg(key).value * _MM.get(ann.arg(key).unit, 1.0)
                         for key in ("max", "rms", "p95") if isinstance(ann.arg(key), A.Number)}
+            g0 = ann.arg("g0")
             out[stmt.name] = {"tol": tol.value * _MM.get(tol.unit, 1.0), "statistic": statistic,
-                              "recorded": recorded}
+                              "recorded": recorded,
+                              "g0": g0.value * _MM.get(g0.unit, 1.0) if isinstance(g0, A.Number) else None}
     return out
 
 
@@ -111,4 +116,35 @@ def run(args) -> int:
               f"{cert.statistic} {cert.value:.4f} mm {'<=' if cert.holds else '>'} tol {cert.tol:g} mm{note}: "
               f"{verdict}", file=sys.stderr)
         failed += not ok
+    failed += _verify_seams(names, shapes, claims, points, owner)
     return 1 if failed else 0
+
+
+def _verify_seams(names, shapes, claims, points, owner) -> int:
+    """Measure the seams between the file's trimmed faces (`rgm.fitters.seam_check`), print them, and
+    return how many fail: a seam holds within the smaller of its faces' tolerances, or, where the fit
+    left it open (both faces' recorded `g0` over the tolerance), grows by no more than 5 % of it."""
+    from rgm.fitters.freeform_measure import TrimmedNurbs
+    from rgm.fitters.seam_check import measure_seams
+
+    faces = {k: shapes[n] for k, n in enumerate(names) if isinstance(shapes[n], TrimmedNurbs)}
+    if len(faces) < 2:
+        return 0
+    seams = measure_seams(faces, points, owner)
+    failed = 0
+    for s in seams:
+        a, b = claims[names[s.a]], claims[names[s.b]]
+        tol = min(a["tol"], b["tol"])
+        recorded = None if a["g0"] is None or b["g0"] is None else min(a["g0"], b["g0"])
+        if s.max <= tol:
+            verdict = "holds"
+        elif recorded is not None and s.max <= recorded + 0.05 * tol:
+            verdict = f"no worse than recorded (g0 {recorded:.4f} mm)"
+        else:
+            verdict, failed = "FAILS", failed + 1
+        print(f"seam {names[s.a]} | {names[s.b]}: G0 gap max {s.max:.4f} mm, p95 {s.p95:.4f} mm ({s.samples} edge "
+              f"samples, to the nearest other face) {'<=' if s.max <= tol else '>'} tol {tol:g} mm: {verdict}",
+              file=sys.stderr)
+    within = sum(s.max <= min(claims[names[s.a]]["tol"], claims[names[s.b]]["tol"]) for s in seams)
+    print(f"seams: {within} of {len(seams)} within the tolerance", file=sys.stderr)
+    return failed
