@@ -10,12 +10,18 @@ annotation (`g0`), so that verify tells a seam the fit left open from one an edi
 Which samples lie on a seam (the scans say it, not the geometry): each face's loops, outer and holes, are
 sampled about half a point spacing apart (by arc length on the surface). A sample lies on the seam with
 face b when the nearest scan point owned by another face (`rgm.fitters.certificate.nearest_part`) is
-within `near` (5 point spacings), belongs to b, and lies *beyond* the edge: within 72 degrees of the direction in which the
-surface leaves its trim. A sample on a free border next to a seam's end has its nearest other
-point sideways or behind, along the border, and is not counted (the fitter's own measure counts it, and
-reads a notch there). Its gap is its distance to the nearest other trimmed face among
-those owning scan points within `near` of it (at a corner of three faces, the third may close it).
-Faces of other kinds (revolutions, boxes) are not measured.
+within `near` (5 point spacings) and belongs to b, and b's points among the 8 nearest lie *across* the
+edge, not along it: their centre more than 60 degrees from the edge's direction. Across a seam the
+neighbour's data leave the edge at right angles to it, whatever the angle between the faces (in line
+with the face, or at a box's right-angled crease); a sample on a free border next to a seam's end has
+the neighbour's nearest points ahead of it, along the border, and is not counted (the fitter's own
+measure counts it up to 5 spacings from the seam, and reads a notch there). So are the samples within
+about a spacing of a face's corner, where the neighbours' points lie diagonally: a gap that opens at the
+corner itself reads as it is a spacing before it. Its gap
+is its distance to the nearest other trimmed face among those owning scan points within `near` of it
+(at a corner of three faces, the third may close it). A hole wider than twice `near` is not seen as a
+seam (the points in it belong to the nearer face: half-way across, none is near the other face's
+edge). Faces of other kinds (revolutions, boxes) are not measured.
 """
 from __future__ import annotations
 
@@ -27,8 +33,8 @@ from scipy.spatial import cKDTree
 __all__ = ["SeamGap", "edge_samples", "measure_seams", "worst_per_face"]
 
 _NEAR = 5.0       # point spacings within which another face's scan point puts a sample on a seam
-_BEYOND = 0.3     # cosine: the other face's nearest point lies beyond the edge (within 72 degrees of outward)
-_PROBE = 1e-4     # parameter step (share of the domain) that finds which side of a loop is outside
+_ALONG = 0.5      # |cosine| between the edge and the way to the other face's nearest points, above which they lie along it
+_K = 8            # the other face's nearest points whose centre says which way they lie
 
 
 @dataclass(frozen=True)
@@ -55,26 +61,27 @@ def edge_samples(surface, loop: np.ndarray, step: float, least: int = 16):
     return surface.evaluate(at[:, 0], at[:, 1]), segment, at
 
 
-def _outward(face, loop: np.ndarray, segment: np.ndarray, uv: np.ndarray, xyz: np.ndarray) -> np.ndarray:
-    """(m, 3) unit directions in which the surface leaves the face across its loop at the samples: away
-    from the side of the loop, probed a little way off in (u, v), that is on the face (zero where neither
-    side or both are). A loop along the domain's edge has its outside off the surface: the inside tells."""
-    (u0, u1), (v0, v1) = face.surface.domain
-    tangent = np.roll(loop, -1, axis=0)[segment] - loop[segment]
-    normal = np.c_[tangent[:, 1], -tangent[:, 0]]
-    normal /= np.maximum(np.linalg.norm(normal, axis=1), 1e-300)[:, None]
-    h = _PROBE * max(u1 - u0, v1 - v0)
-    lo, hi = np.array([u0, v0]), np.array([u1, v1])
+def _partners(xyz, directions, points, owner, others, search, near: float):
+    """(hit (h,), partner (h,)): which of the edge samples xyz (m, 3), running along `directions` (m, 3),
+    lie on a seam (module docstring), and the face each lies on a seam with. `owner` (n,): the face of
+    each point (n, 3); `others` the indices of the points of faces other than the edge's, `search` their
+    k-d tree; `near` (model units) how far a neighbour's point may lie."""
+    d, j = search.query(xyz, k=_K, distance_upper_bound=near)
+    hit = np.flatnonzero(np.isfinite(d[:, 0]))
+    j = np.minimum(j[hit], len(others) - 1)
+    b = owner[others[j[:, 0]]]
+    mine = np.isfinite(d[hit]) & (owner[others[j]] == b[:, None])   # b's among the k nearest
+    toward = np.einsum("mk,mkd->md", mine, points[others[j]]) / mine.sum(axis=1)[:, None] - xyz[hit]
+    toward /= np.maximum(np.linalg.norm(toward, axis=1), 1e-300)[:, None]
+    across = np.abs(np.einsum("ij,ij->i", toward, directions[hit])) < _ALONG
+    return hit[across], b[across]
 
-    def on_face(probe):
-        return np.all((probe >= lo) & (probe <= hi), axis=1) & face.inside(np.clip(probe, lo, hi))
 
-    plus, minus = uv + h * normal, uv - h * normal
-    in_plus, in_minus = on_face(plus), on_face(minus)
-    inward = np.clip(np.where(in_plus[:, None], plus, minus), lo, hi)
-    direction = xyz - face.surface.evaluate(inward[:, 0], inward[:, 1])
-    direction[in_plus == in_minus] = 0.0
-    return direction / np.maximum(np.linalg.norm(direction, axis=1), 1e-300)[:, None]
+def _edge_directions(surface, loop: np.ndarray) -> np.ndarray:
+    """(k, 3) unit directions in space of the closed (u, v) polygon's segments (k, 2) on `surface`."""
+    on = surface.evaluate(loop[:, 0], loop[:, 1])
+    step = np.roll(on, -1, axis=0) - on
+    return step / np.maximum(np.linalg.norm(step, axis=1), 1e-300)[:, None]
 
 
 def measure_seams(faces: dict, points: np.ndarray, owner: np.ndarray, spacing: float | None = None) -> list[SeamGap]:
@@ -95,13 +102,9 @@ def measure_seams(faces: dict, points: np.ndarray, owner: np.ndarray, spacing: f
             continue
         search = cKDTree(points[others])
         for loop in face.loops or ():
-            xyz, segment, uv = edge_samples(face.surface, loop, spacing / 2)
-            d, j = search.query(xyz, distance_upper_bound=near)
-            hit = np.flatnonzero(np.isfinite(d))
-            q = points[others[j[hit]]]
-            toward = (q - xyz[hit]) / np.maximum(d[hit], 1e-300)[:, None]
-            beyond = np.einsum("ij,ij->i", toward, _outward(face, loop, segment[hit], uv[hit], xyz[hit])) > _BEYOND
-            hit, b = hit[beyond], owner[others[j[hit[beyond]]]]
+            xyz, segment, _ = edge_samples(face.surface, loop, spacing / 2)
+            hit, b = _partners(xyz, _edge_directions(face.surface, loop)[segment], points, owner, others,
+                                   search, near)
             keep = np.isin(b, list(faces))
             hit, b = hit[keep], b[keep]
             gap = np.full(len(hit), np.inf)

@@ -64,7 +64,10 @@ def test_a_seam_is_held_to_the_tolerance_or_to_what_the_fit_recorded(tmp_path, p
 def test_rgmc_fit_records_the_seams_verify_measures_and_verify_accepts_them(tmp_path, capsys):
     """A free-form slab seen obliquely (its top and two sides, split at the creases into three trimmed
     faces sharing their intersections): every face records its worst seam gap, and `rgmc verify`
-    measures the same seams, to the printed digits, within the tolerance."""
+    measures the same seams, to the printed digits, and accepts them. Along the shared edges they are
+    within the tolerance (p95); the largest gaps, 1.7 and 2.1 mm, are where a side's free border (the
+    view's silhouette) meets the crease, a spacing or two from the corner: samples there have the top's
+    points across their edge, as along a seam, and read the notch."""
     from rgm.fitters.synthetic import render
 
     view = render("patch", (1.0, 0.8, -1.0), shape=(100, 100), outliers=0.0, seed=2)
@@ -78,8 +81,10 @@ def test_rgmc_fit_records_the_seams_verify_measures_and_verify_accepts_them(tmp_
     recorded = {name: float(g) for g, name in re.findall(r"g0: ([0-9.]+)mm,?\s*\)\s*(\w+) := trim", text)}
     assert len(recorded) >= 2, text[:400]
     assert main(["verify", str(out), str(scan)]) == 0
-    seams = SEAM.findall(capsys.readouterr().err)
-    assert len(seams) == int(summary[2]) and all(v == "holds" for *_, v in seams)
+    err = capsys.readouterr().err
+    seams = SEAM.findall(err)
+    assert len(seams) == int(summary[2]) and all(v in ("holds", "no worse than recorded") for *_, v in seams)
+    assert all(p95 <= 0.5 for p95 in map(float, re.findall(r"p95 ([0-9.]+) mm \(\d+ edge", err)))
     worst = {}
     for a, b, gap, _ in seams:
         for name in (a, b):
