@@ -63,13 +63,13 @@ def cover_seams(points, patches, gaps, tol: float, near: float, retrim, measure,
         face = retrim(original[b], feet)
         return None if face is None else (patches[:b] + [face] + patches[b + 1:], {**covered, b: feet})
 
-    def open_seam(g, patches):
-        return g.max > tol and not g.shared and not _twins(patches, g.i, g.j)
+    def open_seam(g, patches):   # a shared seam is open where its faces' data pieces part beyond the edge
+        return g.worst > tol and not _twins(patches, g.i, g.j)
 
     def better(new, old, faces):
         return score([h for h in new if {h.i, h.j} & faces]) > score([h for h in old if {h.i, h.j} & faces])
 
-    for g in sorted(gaps, key=lambda g: -g.max):
+    for g in sorted(gaps, key=lambda g: -g.worst):
         current = {(h.i, h.j): h for h in gaps}.get((g.i, g.j))
         if current is None or not open_seam(current, patches):
             continue
