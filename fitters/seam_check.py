@@ -50,15 +50,18 @@ class SeamGap:
 
 
 def edge_samples(surface, loop: np.ndarray, step: float, least: int = 16):
-    """(xyz (m, 3), segment (m,), uv (m, 2)): points on `surface` along the closed (u, v) polygon `loop`
-    (k, 2) (last vertex not repeated), about `step` (model units) apart by arc length on the surface
-    (linearly in (u, v) between its vertices; at least `least`), and the polygon segment each lies on."""
+    """(xyz (m, 3), segment (m,), directions (k, 3)): points on `surface` along the closed (u, v) polygon
+    `loop` (k, 2) (last vertex not repeated), about `step` (model units) apart by arc length on the
+    surface (linearly in (u, v) between its vertices; at least `least`), the polygon segment each lies
+    on, and each segment's unit direction in space."""
     uv = np.vstack([loop, loop[:1]])
-    along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(surface.evaluate(uv[:, 0], uv[:, 1]), axis=0), axis=1))]
+    step_xyz = np.diff(surface.evaluate(uv[:, 0], uv[:, 1]), axis=0)
+    length = np.linalg.norm(step_xyz, axis=1)
+    along = np.r_[0.0, np.cumsum(length)]
     t = np.linspace(0.0, along[-1], max(int(along[-1] / step), least), endpoint=False)
     segment = np.clip(np.searchsorted(along, t, side="right") - 1, 0, len(loop) - 1)
-    at = np.c_[np.interp(t, along, uv[:, 0]), np.interp(t, along, uv[:, 1])]
-    return surface.evaluate(at[:, 0], at[:, 1]), segment, at
+    xyz = surface.evaluate(np.interp(t, along, uv[:, 0]), np.interp(t, along, uv[:, 1]))
+    return xyz, segment, step_xyz / np.maximum(length, 1e-300)[:, None]
 
 
 def _partners(xyz, directions, points, owner, others, search, near: float):
@@ -75,13 +78,6 @@ def _partners(xyz, directions, points, owner, others, search, near: float):
     toward /= np.maximum(np.linalg.norm(toward, axis=1), 1e-300)[:, None]
     across = np.abs(np.einsum("ij,ij->i", toward, directions[hit])) < _ALONG
     return hit[across], b[across]
-
-
-def _edge_directions(surface, loop: np.ndarray) -> np.ndarray:
-    """(k, 3) unit directions in space of the closed (u, v) polygon's segments (k, 2) on `surface`."""
-    on = surface.evaluate(loop[:, 0], loop[:, 1])
-    step = np.roll(on, -1, axis=0) - on
-    return step / np.maximum(np.linalg.norm(step, axis=1), 1e-300)[:, None]
 
 
 def measure_seams(faces: dict, points: np.ndarray, owner: np.ndarray, spacing: float | None = None) -> list[SeamGap]:
@@ -102,9 +98,8 @@ def measure_seams(faces: dict, points: np.ndarray, owner: np.ndarray, spacing: f
             continue
         search = cKDTree(points[others])
         for loop in face.loops or ():
-            xyz, segment, _ = edge_samples(face.surface, loop, spacing / 2)
-            hit, b = _partners(xyz, _edge_directions(face.surface, loop)[segment], points, owner, others,
-                                   search, near)
+            xyz, segment, directions = edge_samples(face.surface, loop, spacing / 2)
+            hit, b = _partners(xyz, directions[segment], points, owner, others, search, near)
             keep = np.isin(b, list(faces))
             hit, b = hit[keep], b[keep]
             gap = np.full(len(hit), np.inf)
