@@ -99,6 +99,13 @@ def cover_seams(points, patches, gaps, tol: float, near: float, retrim, measure,
     return patches, gaps
 
 
+def _overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether closed polygons a and b (k, 2) overlap: a vertex of either lies inside the other."""
+    from rgm.geometry.polygon import inside_polygons
+
+    return bool(inside_polygons(a, [b]).any() or inside_polygons(b, [a]).any())
+
+
 def grown_outline(shape, feet: np.ndarray, data_uv: np.ndarray, tol: float):
     """`shape`, whose outer loop has shared edges (`FreeformShape.outline`: the shared arcs and the data
     stretches between them), grown over `feet` (k, 2; surface parameters). The face's region (inside the
@@ -190,11 +197,14 @@ def grown_outline(shape, feet: np.ndarray, data_uv: np.ndarray, tol: float):
     keep = np.r_[True, np.any(np.diff(new_outline, axis=0) != 0, axis=1)]   # no vertex repeated
     keep[-1] &= np.any(new_outline[-1] != new_outline[0])                  # nor the first at the end
     new_outline, new_flags = new_outline[keep], new_flags[keep]
-    # the holes feet lie in are replaced by the grown region's holes inside them; the others kept
+    # the holes feet lie in are replaced by the grown region's holes that overlap them (on the raster a
+    # hole's contour may run outside the old one: taking only those starting inside it, the YCB mustard
+    # bottle's shoulder ring lost the hole round the cap's wrap); the others kept
     new_holes = [list(hole) for h, hole in enumerate(shape.holes) if h not in refill]
     for hole in grown.holes:
-        first = loop_samples(hole)[0][:1]
-        if any(inside_polygons(first, [holes[h]])[0] for h in refill):
+        ring = loop_samples(hole)[0]
+        if any(_overlap(ring, holes[h]) for h in refill) and not any(
+                _overlap(ring, holes[h]) for h in range(len(holes)) if h not in refill):
             new_holes.append(list(hole))
     polys = [new_outline] + [loop_samples(tuple(h))[0] for h in new_holes]
     if signed_area(new_outline) <= 0 or polygon_problems(polys):
