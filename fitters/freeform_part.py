@@ -170,18 +170,24 @@ def fitted_parameters(params, n: int) -> np.ndarray:
 
 
 def retrimmed(shape: FreeformShape, points: np.ndarray, params, tol: float, statistic: str,
-              cover: np.ndarray) -> FreeformShape:
+              cover: np.ndarray, past=None) -> FreeformShape:
     """`shape`, fitted by `fit_freeform` to scattered `points` over `params`, trimmed again to its data
     and the surface parameters `cover` (k, 2) with the band between each and its nearest data parameter
-    (so the region stays one): its surface is unchanged. (`rgm.fitters.seam_cover`.)"""
+    (so the region stays one): its surface is unchanged. (`rgm.fitters.seam_cover`.) A face cut from a
+    closed wrap (its `params` those of the closed surface's face, not inset) keeps its loops along its
+    seams (`shape.loops.band`), `past` (k, 2) the neighbouring face's data past them, as
+    `rgm.fitters.wrap` trimmed it."""
     from scipy.spatial import cKDTree
 
     margin = 0.5 / _bins(len(points))
-    data = fitted_parameters(params, len(points))
+    data = fitted_parameters(params, len(points)) if past is None else np.c_[params]   # a wrap's: as cut
     u, v = data.T
     band = band_samples(cover, data[cKDTree(data).query(cover)[1]], margin)
+    seams = shape.loops.band if shape.loops is not None else None
+    if past is not None and len(past):
+        band = np.r_[band, past]
     return fit_freeform(points, tol, statistic=statistic, cuts=False, params=(u, v), surface=shape.fit,
-                        cover=band)
+                        band=seams, cover=band)
 
 
 def band_samples(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:
@@ -231,8 +237,9 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
             (u, v), fit = map(np.asarray, params), surface
         region = _occupancy(u, v, bins) if cover is None else _occupancy(*np.r_[np.c_[u, v], cover].T, bins)
         rows = cols = (np.arange(bins) + 0.5) / bins
-        # a cover counts as data for the snapping, unless a band holds the loops (a wrap's cover lies past it)
-        snap = np.c_[u, v] if cover is None or band is not None else np.r_[np.c_[u, v], cover]
+        # a cover counts as data for the snapping, but not past a band's ends (a wrap's neighbouring data)
+        snap = np.c_[u, v] if cover is None else np.r_[np.c_[u, v], cover if band is None else
+                                                         cover[(cover[:, 0] > band[0]) & (cover[:, 0] < band[1])]]
         from scipy.spatial import cKDTree
 
         spacing = float(np.median(cKDTree(points).query(points, k=2)[0][:, 1]))

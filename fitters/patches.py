@@ -68,12 +68,15 @@ merged views of a closed or wrapped part:
    edges grows the data stretches between them, `grown_outline`), kept if every sample scores better.
    Each choice above scores a set of seams (`_score`) at each seam's worst as written: along a shared
    edge and beyond its ends, where the faces' data pieces run on (`Gap.rest`); a shared seam open there
-   is grown like one that shares nothing. YCB views at 1.5 mm (the tests' six views), seams within 1 mm
-   as the file reads back (`rgm.fitters.seam_check`, as `rgmc verify` measures them): mustard bottle,
-   noise seeds 1 and 4: 12/13, 9/12 (worst 2.49, 1.72 mm); cracker box, seed 1: 12/12 (0.45 mm); potted
-   meat can, seeds 1-4: 20/38, 46/65, 59/76, 42/54 (worst 3.0-4.9 mm); 227 of 328 seams over these and
-   three 1 mm view sets of the can, 169 of 322 when the score took a shared seam along its edge alone
-   (the counts reported until 2026-12-07 did too, and read every seam of the bottle and the box within).
+   is grown like one that shares nothing. A face of a closed wrap grows too, its loop held along the
+   seams it shares with the wrap's other face, and the seams are measured along holes as well as outer
+   loops. YCB views at 1.5 mm (the tests' six views), seams within 1 mm as the file reads back
+   (`rgm.fitters.seam_check`, as `rgmc verify` measures them): mustard bottle, noise seeds 1 and 4:
+   13/13, 9/12 (worst 0.70, 1.10 mm); cracker box, seed 1: 12/12 (0.45 mm); potted meat can, seeds
+   1-4: 16/35, 45/63, 60/72, 40/52 (worst 2.7-4.0 mm); 227 of 319 seams over these and three 1 mm view
+   sets of the can (227 of 328 before the wraps grew, 169 of 322 when the score took a shared seam along
+   its edge alone: the counts reported until 2026-12-07 did too, and read every seam of the bottle and
+   the box within).
    What stays over: seams "too short on one side to share" at three-patch corners, near-tangent surfaces
    that part by more than the tolerance before they reach the other face, slivers, the meat can's rolled
    rim. The figures move with the machine (floating-point differences steer the discrete choices). Their
@@ -367,13 +370,14 @@ def _covered(points, patches, gaps, tol, statistic, near, fresh=False):
     from rgm.fitters.seam_cover import cover_seams, grown_outline
 
     def retrim(patch, feet):
-        if patch.base.wrap is not None:   # a closed wrap's face: its loops run along the seams (not grown)
-            return None
         if patch.shape.outline is not None:   # shared edges in its loop: the data stretches between grown
-            shape = grown_outline(patch.shape, feet, fitted_parameters(patch.params, len(patch.indices)), tol)
+            data = np.c_[patch.params] if patch.base.wrap is not None else \
+                fitted_parameters(patch.params, len(patch.indices))   # a wrap's face is cut, not inset
+            shape = grown_outline(patch.shape, feet, data, tol)
             return None if shape is None else PatchFit(patch.indices, patch.base, shape, patch.seconds, patch.params)
-        try:
-            shape = retrimmed(patch.shape, points[patch.indices], patch.params, tol, statistic, feet)
+        try:   # a closed wrap's face keeps its loop along the seams (with its twin's data past them)
+            shape = retrimmed(patch.shape, points[patch.indices], patch.params, tol, statistic, feet,
+                              past=None if patch.base.wrap is None else _past_seams(patch))
         except GeometryError:
             return None
         if check_loops(shape.loops.outer, shape.loops.holes):
@@ -390,6 +394,17 @@ def _covered(points, patches, gaps, tol, statistic, near, fresh=False):
     # the choices above take 150 samples a seam; kept only if every sample (as reported) scores better
     final = as_written(points, grown, gaps, near, per_seam=None, step=near / 40)
     return (grown, final) if _score(final, tol) > _score(before, tol) else (patches, before)
+
+
+def _past_seams(patch: PatchFit) -> np.ndarray:
+    """(k, 2) the parameters, in the face `patch` of a closed wrap, of its twin's data past its seams
+    (within the margin it reaches past them), as `rgm.fitters.wrap.fit_wrap` trims the face."""
+    wrap = patch.base.wrap
+    own = np.flatnonzero(np.isin(wrap.indices, patch.indices))
+    s = np.mod(wrap.u - wrap.start(patch.indices) + wrap.delta, 1.0) / (0.5 + 2 * wrap.delta)
+    slope, offset = np.polyfit(wrap.v[own], patch.params[1], 1)   # the face's v: the wrap's past its margin
+    past = np.setdiff1d(np.flatnonzero(s <= 1.0), own)
+    return np.c_[s[past], offset + slope * wrap.v[past]]
 
 
 def _score(gaps, tol):
@@ -708,11 +723,11 @@ def written_face(shape: FreeformShape) -> TrimmedNurbs:
 
 
 def boundary_samples(shape: FreeformShape, step: float) -> tuple[np.ndarray, np.ndarray]:
-    """(points (m, 3), shared (m,)): samples on the surface along its outer trimming loop as written (the
-    data loop, or where it has shared edges its `outline`), about `step` (model units) apart along it (the
-    polygon of the loop, 200 samples a data piece, resampled by arc length, linearly in (u, v) between its
-    vertices), and the patch each sample's piece is shared with (-1: a data piece); made once per shape
-    and step, as `written_face` is."""
+    """(points (m, 3), shared (m,)): samples on the surface along its trimming loops as written (the outer
+    one its data loop, or where it has shared edges its `outline`; then the holes, as `rgmc verify`
+    samples them), about `step` (model units) apart along each (the polygon of the loop, 200 samples a
+    data piece, resampled by arc length, linearly in (u, v) between its vertices), and the patch each
+    sample's piece is shared with (-1: a data piece); made once per shape and step, as `written_face` is."""
     return _remembered(shape, "_boundary_samples", step, lambda: _boundary_samples(shape, step))
 
 
@@ -733,7 +748,8 @@ def _boundary_samples(shape: FreeformShape, step: float) -> tuple[np.ndarray, np
 
     loops, shared = _written_loops(shape)
     xyz, segment, _ = edge_samples(shape.nurbs(), loops[0], step)
-    return xyz, shared[segment]
+    holes = [edge_samples(shape.nurbs(), hole, step)[0] for hole in loops[1:]]   # their pieces share nothing
+    return np.vstack([xyz, *holes]), np.r_[shared[segment], np.full(sum(map(len, holes)), -1)]
 
 
 def as_written(points, patches: list[PatchFit], gaps: list[Gap], near: float, **sampling) -> list[Gap]:

@@ -9,7 +9,9 @@ projected onto b's surface; where the foot lies within the tolerance and inside 
 grown to cover it, with the band between its data and the foot (`rgm.fitters.freeform_part.fit_freeform`,
 `cover`). Face a's edge then lies on face b within the tolerance: G0 as the written model has it, the
 faces overlapping by at most half a trimming raster cell. The surfaces are not changed, so the
-certificates stand; a grown trim is kept only when the seams it touches score better.
+certificates stand; a grown trim is kept only when the seams it touches score better. A face cut from a
+closed wrap (`rgm.fitters.wrap`) grows the same way, its loop held straight along the two iso-lines it
+shares with the wrap's other face (`TrimLoops.band`), so that seam stays one curve.
 """
 from __future__ import annotations
 
@@ -154,6 +156,7 @@ def grown_outline(shape, feet: np.ndarray, data_uv: np.ndarray, tol: float):
     if not grow and not refill:
         return None
     bins = _bins(len(data_uv))
+    seams = shape.loops.band if shape.loops is not None else None   # a wrap's face: its loop runs along them
     step = 0.5 / bins
     use = outside | (hole_of >= 0)
     band = band_samples(feet[use], ends[use], step)
@@ -162,9 +165,15 @@ def grown_outline(shape, feet: np.ndarray, data_uv: np.ndarray, tol: float):
     inside = inside_polygons(cells, [outline]) & ~inside_polygons(cells, holes) if holes else \
         inside_polygons(cells, [outline])
     region = inside.reshape(bins, bins) | _occupancy(*band.T, bins)
+    if seams is not None:   # cells past a seam as at the seam, so the contour runs on along it, not short
+        inner = np.flatnonzero((centres > seams[0]) & (centres < seams[1]))
+        if len(inner):
+            region[centres <= seams[0]] = region[inner[0]]
+            region[centres >= seams[1]] = region[inner[-1]]
     tol_uv = tol / _surface_speed(shape.fit)
     try:
-        grown = fit_trim_loops(region, centres, centres, tol_uv, snap_to=np.r_[data_uv, band], domain=((0, 1), (0, 1)))
+        grown = fit_trim_loops(region, centres, centres, tol_uv, snap_to=np.r_[data_uv, band], domain=((0, 1), (0, 1)),
+                               band=seams)
     except GeometryError:
         return None
     ring = loop_samples(grown.outer)[0]
@@ -184,7 +193,7 @@ def grown_outline(shape, feet: np.ndarray, data_uv: np.ndarray, tol: float):
         if len(chain) < 2:
             return None
         try:
-            pieces = fit_open_chain(chain, tol_uv)
+            pieces = fit_open_chain(chain, tol_uv, band=seams)
         except GeometryError:
             return None
         pieces = [replace(p, ctrl=np.clip(p.ctrl, 0.0, 1.0)) for p in pieces]

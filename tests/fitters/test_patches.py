@@ -329,16 +329,15 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path, 
     assert any("closed round its axis" in g.why and not g.shared for g in result.gaps)
     assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     # G0 as the file reads back (`rgmc verify`): every sample of every seam, beyond a shared edge's ends
-    # too. Seed 1: 12 of 13 within 1 mm; the body's half and the bottom share an edge 0.14 mm apart, but
-    # beyond its ends their data pieces leave 2.49 mm (the fitter reports it as the seam's `rest`: until
-    # 2026-12-07 its count took the edge alone and read 13 of 13). Seed 4: 9 of 12, worst 1.72 mm, since
-    # the fitter's choices weigh the rest too (11 of 12 before: 4-5 and 4-6, short seams between the cap's
-    # flat ring and the halves of its wrap, now stay 1.26 and 1.72 mm apart; over the YCB test views the
-    # count as written rose from 169 of 322 seams to 227 of 328, the cracker box's from 5 of 12 to 12 of 12)
+    # too. Seed 1: 13 of 13 within 1 mm, worst 0.70 mm, since the faces of a closed wrap grow (the body's
+    # half stopped 2.49 mm above the bottom beyond the edge they share; until 2026-12-07 the count took
+    # the edge alone and read 13 of 13). Seed 4: 9 of 12, worst 1.10 mm (1.72 before the wraps grew: the
+    # cap's wrap stopped 1.7 mm above its flat ring; 11 of 12 before the fitter's choices weighed a shared
+    # seam's rest)
     seams = file_seams(p, parts)
     assert set(seams) == {(g.i, g.j) for g in result.gaps}
     within = sum(g.max <= 1.0 for g in seams.values())
-    assert within >= 0.75 * len(seams) and max(g.max for g in seams.values()) < 2.6, \
+    assert within >= 0.75 * len(seams) and max(g.max for g in seams.values()) < 1.5, \
         sorted((round(g.max, 2), g.a, g.b) for g in seams.values() if g.max > 1.0)
     assert max(g.max for g in shared) < min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
@@ -381,9 +380,10 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
     # G0 as the file reads back (`rgmc verify`, every sample of every seam, beyond a shared edge's ends
-    # too): 20 of 38 seams within 1 mm, worst 3.86 mm (seeds 2-4 46/65, 59/76, 42/54; at 1 mm views
-    # seeds 1-3 6/21, 8/19, 13/18), once the fitter's choices weighed a shared seam's rest and a shared
-    # stretch that stops short of a three-patch corner is carried on to it (before: 17/36, 26/60, 36/75,
+    # too): 16 of 35 seams within 1 mm, worst 3.78 mm (seeds 2-4 45/63, 60/72, 40/52; at 1 mm views
+    # seeds 1-3 8/21, 13/20, 11/19), since the faces of the closed wrap grow too (before: 20/38, 46/65,
+    # 59/76, 42/54; 6/21, 8/19, 13/18; before the fitter's choices weighed a shared seam's rest and a
+    # shared stretch that stops short of a three-patch corner was carried on to it: 17/36, 26/60, 36/75,
     # 34/55; 5/20, 10/21, 13/18). Until 2026-12-07 the counts here took a shared seam along its edge
     # alone (23 of 39, worst 3.79 mm); their history is in docs/fitting.md and the commit log. What stays
     # open: the rolled rim's slivers and the lid's three-patch corners, whose trims stop 1-4 mm short
@@ -396,7 +396,7 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
           f"ctrl {[s.fit.n_ctrl for s in result.shapes]}")
     # the figures move by machine (floating-point differences steer discrete choices: the segmentation's
     # pieces, the knots inserted); regression bounds
-    assert within >= 0.45 * len(seams) and max(g.max for g in seams.values()) < 5.0
+    assert within >= 0.4 * len(seams) and max(g.max for g in seams.values()) < 5.0
     assert all(g.max < g.before for g in curves)
     assert all(g.why for g in result.gaps if not g.shared)
     for g in shared:
