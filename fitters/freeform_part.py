@@ -20,7 +20,8 @@ from rgm.fitters.freeform import SurfaceFit, design_matrix, grid_parameters, pla
 from rgm.fitters.freeform_surface import fit_surface
 from rgm.fitters.trimloops import TrimLoops, fit_trim_loops
 
-__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set", "printed_surface", "retrimmed", "fitted_parameters"]
+__all__ = ["FreeformShape", "fit_freeform", "emit_freeform", "emit_freeform_set", "printed_surface", "retrimmed", "fitted_parameters",
+           "trim_parameters"]
 
 _DEC = 4   # decimals of model-space numbers (mm): 0.1 micrometre
 _UV_DEC = 9
@@ -169,18 +170,24 @@ def fitted_parameters(params, n: int) -> np.ndarray:
     return np.c_[[_inset(np.asarray(t, float), margin) for t in params]].T
 
 
+def trim_parameters(shape: FreeformShape, params, n: int) -> np.ndarray:
+    """(n, 2) the surface parameters a face's n scattered points were trimmed at: a face cut from a
+    closed wrap (its loops held to a band, `rgm.fitters.wrap`) at its `params` as cut, any other at
+    them inset as `fit_freeform` fits them (`fitted_parameters`)."""
+    return np.c_[params] if shape.loops is not None and shape.loops.band is not None else fitted_parameters(params, n)
+
+
 def retrimmed(shape: FreeformShape, points: np.ndarray, params, tol: float, statistic: str,
               cover: np.ndarray, past=None) -> FreeformShape:
     """`shape`, fitted by `fit_freeform` to scattered `points` over `params`, trimmed again to its data
     and the surface parameters `cover` (k, 2) with the band between each and its nearest data parameter
     (so the region stays one): its surface is unchanged. (`rgm.fitters.seam_cover`.) A face cut from a
-    closed wrap (its `params` those of the closed surface's face, not inset) keeps its loops along its
-    seams (`shape.loops.band`), `past` (k, 2) the neighbouring face's data past them, as
-    `rgm.fitters.wrap` trimmed it."""
+    closed wrap keeps its loops along its seams (`shape.loops.band`), `past` (k, 2) the neighbouring
+    face's data past them, as `rgm.fitters.wrap` trimmed it."""
     from scipy.spatial import cKDTree
 
     margin = 0.5 / _bins(len(points))
-    data = fitted_parameters(params, len(points)) if past is None else np.c_[params]   # a wrap's: as cut
+    data = trim_parameters(shape, params, len(points))
     u, v = data.T
     band = band_samples(cover, data[cKDTree(data).query(cover)[1]], margin)
     seams = shape.loops.band if shape.loops is not None else None

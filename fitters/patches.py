@@ -98,7 +98,7 @@ from rgm.errors import GeometryError
 from rgm.fitters.creases import checked_points, median_spacing, split_scattered, unit_rows
 from rgm.fitters.freeform import Anchors, design_matrix
 from rgm.fitters.freeform_measure import TrimmedNurbs
-from rgm.fitters.freeform_part import FreeformShape, fit_freeform, fitted_parameters, retrimmed
+from rgm.fitters.freeform_part import FreeformShape, fit_freeform, retrimmed, trim_parameters
 from rgm.fitters.normals import pca_normals
 from rgm.fitters.patch_base import Base, Wrap, base_parameters, reach_past
 from rgm.fitters.patch_merge import merge_neighbours
@@ -371,8 +371,7 @@ def _covered(points, patches, gaps, tol, statistic, near, fresh=False):
 
     def retrim(patch, feet):
         if patch.shape.outline is not None:   # shared edges in its loop: the data stretches between grown
-            data = np.c_[patch.params] if patch.base.wrap is not None else \
-                fitted_parameters(patch.params, len(patch.indices))   # a wrap's face is cut, not inset
+            data = trim_parameters(patch.shape, patch.params, len(patch.indices))
             shape = grown_outline(patch.shape, feet, data, tol)
             return None if shape is None else PatchFit(patch.indices, patch.base, shape, patch.seconds, patch.params)
         try:   # a closed wrap's face keeps its loop along the seams (with its twin's data past them)
