@@ -342,7 +342,9 @@ def _branch_and_bound(surface, evaluate, queries, uv, pts, dist, levels: int = 1
     tightened by their corners (points of the surface) and the `keep` nearest boxes of each query kept;
     a Newton start from the middle of each, confined to its Bézier patch, then gives the answer. Rational
     nets whose weights vary much crowd their surface into stretches of parameter (dips 0.002 wide) that
-    no sampling spread by the net sees; the boxes see them."""
+    no sampling spread by the net sees; the boxes see them. No queries: nothing to tighten."""
+    if not len(queries):
+        return uv, pts, dist
     nets, rects = _bezier_patches(surface)
     euclid = nets[..., :3] / nets[..., 3:]
     size = float(np.linalg.norm(euclid.reshape(-1, 3).max(axis=0) - euclid.reshape(-1, 3).min(axis=0))) or 1.0

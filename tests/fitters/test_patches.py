@@ -39,8 +39,10 @@ CRACKER_BOX = YCB / "003_cracker_box_textured.obj"
 
 def written_gaps(points, result, model, step=0.1):
     """{(i, j): max gap} of the seams, measured on the written file (an oracle for
-    `rgm.fitters.patches.as_written`): the 2-D pieces of each face's outer loop as rgm reads it back (the
-    data pieces: a shared edge's samples lie on its own seam), sampled about `step` mm apart; a sample lies
+    `rgm.fitters.patches.as_written`): the 2-D pieces of each face's loops, outer and holes, as rgm reads
+    them back (the data pieces: a shared edge's samples lie on its own seam), sampled about `step` mm apart
+    (piece by piece: a hole's seam with a neighbour is measured as an outer loop's; a piece along a
+    closed wrap's seam is on that seam, not measured here); a sample lies
     on the seam with the patch owning the nearest other input point within 5 point spacings, and is
     measured to the nearest other face of the file read back (`TrimmedNurbs.from_model`: trimmed as
     written) among the patches with input points within those 5 spacings."""
@@ -59,10 +61,13 @@ def written_gaps(points, result, model, step=0.1):
         face = model.objects[f"patch_{a + 1}"]
         surface = face.surface.nurbs()
         xyz = []
-        for piece in face.loops()[0].pieces:
+        band = result.shapes[a].loops.band if result.shapes[a].loops is not None else None
+        for piece in (piece for loop in face.loops() for piece in loop.pieces):
             if isinstance(piece, IntersectionCurve) or piece.dim != 2:
                 continue
             c = piece.nurbs()
+            if band is not None and any(np.abs(c.ctrl[:, 0] - u).max() < 1e-6 for u in band):
+                continue   # along a closed wrap's seam: on the seam with its other face, whatever points are nearest
             uv = c.evaluate(np.linspace(*c.domain, 4001))[:, :2]
             on = surface.evaluate(uv[:, 0], uv[:, 1])
             along = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(on, axis=0), axis=1))]
@@ -224,6 +229,15 @@ def test_capped_cylinder_splits_at_its_rims_and_the_wrap_is_cut_in_two(tmp_path)
     assert all(g.max <= 0.2 for g in result.gaps)
     wrap = [g for g in result.gaps if result.patches[g.i].base.wrap and result.patches[g.j].base.wrap]
     assert len(wrap) == 1 and wrap[0].max < 1e-9 and "closed round its axis" in wrap[0].why
+    # where a rim meets the wrap's seams, both faces' rim edges run to tol / 4 short of the point where
+    # they cross it (one surface: the same point), and each face's loop on by it, so the faces meet at
+    # those corners too. As the file reads back (`rgmc verify`): every seam within the tolerance, the
+    # rims 0.009 mm, the wrap's seam 0.064 mm (ending where the seam runs ended, the edges left each
+    # rim's data pieces 0.17-0.34 mm from the other face, and the wrap's seam read 0.53 mm at the rims;
+    # the fitter's own measure beyond the edges' ends, which counts samples ahead along a border, 0.12 mm)
+    assert max(g.rest for g in result.gaps) <= 0.75 * 0.2
+    seams = file_seams(p, parts)
+    assert set(seams) == {(g.i, g.j) for g in result.gaps} and max(g.max for g in seams.values()) <= 0.5 * 0.2, seams
     model = rgm.loads(text)
     assert not [d for d in model.diagnostics if d.is_error]
     assert all(isinstance(model.objects[f"patch_{k}"], TrimmedFace) for k in range(1, 5))
@@ -329,15 +343,18 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path, 
     assert any("closed round its axis" in g.why and not g.shared for g in result.gaps)
     assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     # G0 as the file reads back (`rgmc verify`): every sample of every seam, beyond a shared edge's ends
-    # too. Seed 1: 13 of 13 within 1 mm, worst 0.70 mm, since the faces of a closed wrap grow (the body's
+    # too. Seed 1: 13 of 13 within 1 mm, worst 0.69 mm, since the faces of a closed wrap grow (the body's
     # half stopped 2.49 mm above the bottom beyond the edge they share; until 2026-12-07 the count took
-    # the edge alone and read 13 of 13). Seed 4: 9 of 12, worst 1.10 mm (1.72 before the wraps grew: the
-    # cap's wrap stopped 1.7 mm above its flat ring; 11 of 12 before the fitter's choices weighed a shared
-    # seam's rest)
+    # the edge alone and read 13 of 13). Seed 4: 12 of 12, worst 0.69 mm, since a grown hole follows the
+    # neighbour's edge within a quarter of the tolerance and the cap's edges with its top run to the
+    # wrap's seam (9 of 12 before, worst 1.10 mm: the shoulder ring's hole round the cap's wrap 1.02 and
+    # 1.10 mm from it, the cap's top 1.02 mm from a wrap face beside the seam; 1.72 before the wraps grew;
+    # 11 of 12 before the fitter's choices weighed a shared seam's rest). Floating-point differences steer
+    # the fitter's discrete choices by machine: one seam may fall just over
     seams = file_seams(p, parts)
     assert set(seams) == {(g.i, g.j) for g in result.gaps}
     within = sum(g.max <= 1.0 for g in seams.values())
-    assert within >= 0.75 * len(seams) and max(g.max for g in seams.values()) < 1.5, \
+    assert within >= len(seams) - 1 and max(g.max for g in seams.values()) < 1.2, \
         sorted((round(g.max, 2), g.a, g.b) for g in seams.values() if g.max > 1.0)
     assert max(g.max for g in shared) < min(g.before for g in shared)
     assert all(g.why for g in result.gaps if not g.shared)
@@ -380,8 +397,11 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     shared = [g for g in result.gaps if g.shared]
     assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
     # G0 as the file reads back (`rgmc verify`, every sample of every seam, beyond a shared edge's ends
-    # too): 16 of 35 seams within 1 mm, worst 3.78 mm (seeds 2-4 45/63, 60/72, 40/52; at 1 mm views
-    # seeds 1-3 8/21, 13/20, 11/19), since the faces of the closed wrap grow too (before: 20/38, 46/65,
+    # too): 16 of 35 seams within 1 mm, worst 3.98 mm (seeds 2-4 36/65, 53/68, 39/56; at 1 mm views
+    # seeds 1-3 8/21, 13/20, 13/19), since grown holes follow a neighbour's edge within a quarter of the
+    # tolerance and edges run to a closed wrap's seam (before: 16/35, 45/63, 60/72, 40/52; 8/21, 13/20,
+    # 11/19; the rim's slivers steer the choices: a shared stretch moved at the mantle's seam changes
+    # which loops rebuild), since the faces of the closed wrap grow too (before: 20/38, 46/65,
     # 59/76, 42/54; 6/21, 8/19, 13/18; before the fitter's choices weighed a shared seam's rest and a
     # shared stretch that stops short of a three-patch corner was carried on to it: 17/36, 26/60, 36/75,
     # 34/55; 5/20, 10/21, 13/18). Until 2026-12-07 the counts here took a shared seam along its edge

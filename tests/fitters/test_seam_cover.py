@@ -80,18 +80,19 @@ def test_a_gap_the_surfaces_do_not_close_is_left_as_measured():
     assert after[0].max >= 0.9 * gaps[0].max or all(g.shape is p.shape for g, p in zip(grown, patches))
 
 
-def _square_face(hole=False):
+def _square_face(hole=False, grid=None):
     """A plane 40 x 40 mm fitted over [0.2, 0.8]² of its parameters (so it reaches past its data), its
     outer loop the square [0.2, 0.8]² with the side v = 0.2 shared with patch 7 (`FreeformShape.outline`)
     and the other three sides one data stretch; with `hole`, a hole [0.4, 0.6]² (clockwise) with no data
-    in it."""
+    in it. The data: 2000 random parameters, or with `grid` a regular grid of grid x grid."""
     from rgm.fitters.freeform_part import FreeformShape
     from rgm.fitters.freeform_surface import fit_surface
     from rgm.fitters.shared_edges import SharedEdge
     from rgm.fitters.trimloops import TrimLoops, fit_closed_loop, fit_open_chain
 
     rng = np.random.default_rng(3)
-    uv = rng.uniform(0.2, 0.8, (2000, 2))
+    uv = rng.uniform(0.2, 0.8, (2000, 2)) if grid is None else \
+        np.stack(np.meshgrid(*[np.linspace(0.2, 0.8, grid)] * 2), axis=-1).reshape(-1, 2)
     if hole:
         uv = uv[np.abs(uv - 0.5).max(axis=1) > 0.1]
     pts = np.c_[(uv - 0.2) * 40 / 0.6, np.zeros(len(uv))]
@@ -146,6 +147,30 @@ def test_a_face_with_a_shared_edge_grows_its_data_stretch_and_keeps_the_edge():
     on = cKDTree(holes[0]).query(inner)[0] < 0.01      # its contour is snapped to the feet
     assert (~inside_polygons(inner, holes) | on).all()
     assert np.array_equal(filled.outline, holed.outline[:-1])   # as it was (its closing vertex not repeated)
+
+
+@pytest.mark.parametrize("radius", [0.07, 0.085])
+def test_a_grown_hole_runs_through_the_feet_within_a_fraction_of_the_tolerance(radius):
+    """A neighbour's round edge (feet on a circle, in the square face's hole, 40 mm / 0.6 a parameter
+    unit): the hole grown over it runs through the feet closer than the trims' raster and the tolerance
+    allow a data loop. A grown edge lies on the neighbour only as closely as its loop follows the feet,
+    so that fit takes a quarter of the tolerance: 0.16 and 0.19 mm at tol 1 mm (the contour's cells are
+    0.57 mm), where fitted at the whole tolerance, as a data loop is, it ran 0.52 and 0.63 mm from them
+    (the YCB mustard bottle's shoulder ring, noise seed 4: its hole round the cap's wrap 1.02 and 1.10
+    mm from the cap's faces)."""
+    from rgm.fitters.seam_cover import grown_outline
+    from rgm.fitters.trimloops import loop_samples
+    from rgm.geometry.polygon import inside_polygons
+
+    holed, uv = _square_face(hole=True, grid=140)
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    feet = 0.5 + radius * np.c_[np.cos(t), np.sin(t)]
+    grown = grown_outline(holed, feet, uv, 1.0)
+    assert grown is not None
+    # the hole round the feet (the old hole's corners, which no foot's band reaches, stay holes as well)
+    round_hole, = [h for h in (loop_samples(tuple(h))[0] for h in grown.holes)
+                   if inside_polygons(np.array([[0.5, 0.5]]), [h]).all()]
+    assert cKDTree(round_hole).query(feet)[0].max() * 40 / 0.6 <= 0.25
 
 
 def test_a_closed_wrap_grows_down_to_its_neighbours_edge_and_keeps_its_seams():

@@ -170,3 +170,15 @@ def test_points_just_off_a_revolution_of_a_polyline_are_found_near(seed):
     step *= rng.uniform(0, 0.3, (400, 1)) / np.linalg.norm(step, axis=1, keepdims=True)
     dist = s.closest_point(on + step)[3]
     assert np.all(dist <= np.linalg.norm(step, axis=1) + 1e-9)
+
+
+def test_no_query_points_give_no_closest_points_on_any_surface():
+    """Zero query points give empty answers, also on surfaces searched by branch and bound (a revolution
+    of a polyline: C0 knots; it raised a bare numpy error, and `rgmc fit` of a YCB meat can's views
+    stopped with it where a face had no neighbour's edge sample near enough to grow over)."""
+    from rgm.geometry.conics import polyline_curve
+    from rgm.geometry.revolve import revolution_surface
+
+    s = revolution_surface(polyline_curve([[0, 0, 0], [3, 0, 1], [2, 0, 4], [0, 0, 5]]), [0, 0, 0], [0, 0, 1])
+    u, v, pts, dist = s.closest_point(np.zeros((0, 3)))
+    assert u.shape == v.shape == dist.shape == (0,) and pts.shape == (0, 3)
