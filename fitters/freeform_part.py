@@ -53,6 +53,12 @@ class FreeformShape:
     def nurbs(self):
         return self.fit.nurbs()
 
+    @property
+    def band(self) -> tuple | None:
+        """(u0, u1): the iso-lines a face cut from a closed wrap shares with the wrap's other face, its
+        loops held along them (`TrimLoops.band`, `rgm.fitters.wrap`); None for any other face."""
+        return self.loops.band if self.loops is not None else None
+
     def distance(self, points: np.ndarray) -> np.ndarray:
         """Closest-point distances (n,) of points (n, 3) to the (untrimmed) surface, model units."""
         from rgm.geometry.inversion import closest_point_surface
@@ -174,7 +180,7 @@ def trim_parameters(shape: FreeformShape, params, n: int) -> np.ndarray:
     """(n, 2) the surface parameters a face's n scattered points were trimmed at: a face cut from a
     closed wrap (its loops held to a band, `rgm.fitters.wrap`) at its `params` as cut, any other at
     them inset as `fit_freeform` fits them (`fitted_parameters`)."""
-    return np.c_[params] if shape.loops is not None and shape.loops.band is not None else fitted_parameters(params, n)
+    return np.c_[params] if shape.band is not None else fitted_parameters(params, n)
 
 
 def retrimmed(shape: FreeformShape, points: np.ndarray, params, tol: float, statistic: str,
@@ -182,7 +188,7 @@ def retrimmed(shape: FreeformShape, points: np.ndarray, params, tol: float, stat
     """`shape`, fitted by `fit_freeform` to scattered `points` over `params`, trimmed again to its data
     and the surface parameters `cover` (k, 2) with the band between each and its nearest data parameter
     (so the region stays one): its surface is unchanged. (`rgm.fitters.seam_cover`.) A face cut from a
-    closed wrap keeps its loops along its seams (`shape.loops.band`), `past` (k, 2) the neighbouring
+    closed wrap keeps its loops along its seams (`shape.band`), `past` (k, 2) the neighbouring
     face's data past them, as `rgm.fitters.wrap` trimmed it."""
     from scipy.spatial import cKDTree
 
@@ -190,11 +196,10 @@ def retrimmed(shape: FreeformShape, points: np.ndarray, params, tol: float, stat
     data = trim_parameters(shape, params, len(points))
     u, v = data.T
     band = band_samples(cover, data[cKDTree(data).query(cover)[1]], margin)
-    seams = shape.loops.band if shape.loops is not None else None
     if past is not None and len(past):
         band = np.r_[band, past]
     return fit_freeform(points, tol, statistic=statistic, cuts=False, params=(u, v), surface=shape.fit,
-                        band=seams, cover=band)
+                        band=shape.band, cover=band)
 
 
 def band_samples(a: np.ndarray, b: np.ndarray, step: float) -> np.ndarray:

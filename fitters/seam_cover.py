@@ -156,7 +156,7 @@ def grown_outline(shape, feet: np.ndarray, data_uv: np.ndarray, tol: float):
     if not grow and not refill:
         return None
     bins = _bins(len(data_uv))
-    seams = shape.loops.band if shape.loops is not None else None   # a wrap's face: its loop runs along them
+    seams = shape.band   # a wrap's face: its loop runs along them
     step = 0.5 / bins
     use = outside | (hole_of >= 0)
     band = band_samples(feet[use], ends[use], step)

@@ -409,7 +409,7 @@ def _wrap_joins(cands: dict, shapes, tol: float, near: float) -> None:
     end by the crossing and takes the data up to it as covered (the data loop's corner lay 1 mm past the
     intersection, and the loop ran out to it and back: the bottle's body 1.36 mm off its shoulder, seed 3)."""
     def crossings(pair, a):
-        band = shapes[a].loops.band if shapes[a].loops is not None else None
+        band = shapes[a].band
         cand = cands[pair]
         if band is None or cand.curve is not None:
             return []
@@ -497,7 +497,7 @@ def rebuild_loop(k, shape, loop: _Loop, cands: list, tol_uv: float, reach: float
         if len(chain) < 2:
             return "two shared edges would meet with no data piece between"
         try:
-            rest_pieces = fit_open_chain(chain, tol_uv, band=shape.loops.band if shape.loops else None)
+            rest_pieces = fit_open_chain(chain, tol_uv, band=shape.band)
         except GeometryError as exc:
             return f"the rest of its loop could not be fitted ({exc})"
         rest_pieces = tuple(replace(p, ctrl=np.clip(p.ctrl, 0.0, 1.0)) for p in rest_pieces)
