@@ -218,7 +218,7 @@ def _inset(t: np.ndarray, margin: float) -> np.ndarray:
 
 def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statistic: str = "p95",
                  max_ctrl: int = 40000, cuts: bool = True, params=None, anchors=None, surface=None,
-                 band=None, cover=None) -> FreeformShape:
+                 band=None, cover=None, sides=None) -> FreeformShape:
     """Fit a trimmed NURBS surface to a part's points (n, 3), or to a range grid (rows, cols, 3) with
     its valid mask. `tol` (model units) bounds `statistic` of the residuals. With `cuts`, planar boundary
     pieces become described plane intersections, when the intersection follows the data's edge and the
@@ -231,7 +231,9 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
     data): the surface is already fitted, only trimmed here (a face cut from a closed wrap,
     `rgm.fitters.wrap`), with its loops held within `band` (u0, u1) and along its ends
     (`rgm.fitters.trimloops.fit_trim_loops`); `cover` (k, 2): parameters of the neighbour's data past the
-    band's ends, whose cells count as occupied, so that the loops run along the ends without a notch."""
+    band's ends, whose cells count as occupied, so that the loops run along the ends without a notch.
+    `sides` (n,): labels of scattered points on each of which the statistic must hold on its own
+    (`fit_surface`)."""
     if grid is not None:
         mask = np.isfinite(grid).all(axis=2) if mask is None else mask
         ug, vg = (_inset(t, 0.5 / (len(t) - 1)) for t in grid_parameters(np.where(mask[..., None], grid, 0.0), mask))
@@ -244,7 +246,8 @@ def fit_freeform(points: np.ndarray, tol: float, *, grid=None, mask=None, statis
         if surface is None:
             u, v = (_inset(np.asarray(t, float), 0.5 / bins)
                     for t in (plane_parameters(points)[:2] if params is None else params))
-            fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl, anchors=anchors)
+            fit = fit_surface(points, tol, params=(u, v), statistic=statistic, max_ctrl=max_ctrl, anchors=anchors,
+                              sides=sides)
         else:
             (u, v), fit = map(np.asarray, params), surface
         region = _occupancy(u, v, bins) if cover is None else _occupancy(*np.r_[np.c_[u, v], cover].T, bins)

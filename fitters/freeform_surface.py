@@ -78,12 +78,14 @@ class _SurfaceProblem:
     """The data of a surface fit and how to solve and measure it on given knot vectors: the separable
     solve for a full grid, the sparse normal equations otherwise. Residuals are per data point."""
 
-    def __init__(self, points, mask, params, degree, smoothing, statistic, anchors=None, closed_u=False):
+    def __init__(self, points, mask, params, degree, smoothing, statistic, anchors=None, closed_u=False,
+                 sides=None):
         pts = np.asarray(points, float)
         self.degree, self.smoothing, self.statistic, self.grid = degree, smoothing, statistic, None
         self.anchors, self.closed_u, self._extension = anchors, closed_u, None
-        if (anchors is not None or closed_u) and pts.ndim == 3:
-            raise GeometryError("anchor points and closed nets need scattered data (a grid is solved separably)")
+        if (anchors is not None or closed_u or sides is not None) and pts.ndim == 3:
+            raise GeometryError("anchor points, closed nets and sides need scattered data (a grid is solved "
+                                "separably)")
         if pts.ndim == 3:
             valid = np.isfinite(pts).all(axis=2)
             mask = valid if mask is None else (np.asarray(mask, bool) & valid)
@@ -108,6 +110,8 @@ class _SurfaceProblem:
             self.lines = None
             self.char = (None, None)
         self.extended = pts.ndim == 2   # a range image's cells are its data: no continuation to hold
+        self.sides = [np.arange(len(self.data))] if sides is None else \
+            [np.flatnonzero(np.asarray(sides) == side) for side in np.unique(sides)]
 
     def extension(self, ku, kv, tol: float) -> Extension | None:
         """The `Extension` of scattered data (None for a range grid, or once `extended` is switched off),
@@ -155,8 +159,9 @@ class _SurfaceProblem:
         else:
             res = np.linalg.norm(ScatteredBasis.build(self.u, self.v, ku, kv, p, p).evaluate(ctrl) - self.data, axis=1)
         far = np.flatnonzero(res > tol)
-        allowed = 0 if self.statistic == "max" else int((1 - float(self.statistic[1:]) / 100) * (len(res) - 1))
-        if len(far) <= allowed:
+        share = 0.0 if self.statistic == "max" else 1 - float(self.statistic[1:]) / 100
+        allowed = int(share * (len(res) - 1))
+        if all(np.count_nonzero(res[side] > tol) <= int(share * (len(side) - 1)) for side in self.sides):
             return res
         from rgm.geometry import NurbsSurface
 
@@ -171,6 +176,11 @@ class _SurfaceProblem:
                 return res
         res[far] = feet(far)
         return res
+
+    def value(self, res: np.ndarray) -> float:
+        """The statistic of the residuals (n,) that decides whether the fit holds: on each side's own points,
+        the worst side's."""
+        return max(statistic_value(res[side], self.statistic) for side in self.sides)
 
     def within_data(self, uv: np.ndarray) -> np.ndarray:
         """(k,) bool: parameters uv (k, 2) in the pixel of some data point (within half a data spacing of
@@ -219,7 +229,7 @@ class _SurfaceProblem:
 def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
                 n_initial: int | None = None, max_ctrl: int = 40000, statistic: str = "max",
                 smoothing: float = SMOOTHING, prune: int = 8, min_lines: float = 1.0,
-                data_per_ctrl: float = DATA_PER_CTRL, anchors=None, closed_u: bool = False) -> SurfaceFit:
+                data_per_ctrl: float = DATA_PER_CTRL, anchors=None, closed_u: bool = False, sides=None) -> SurfaceFit:
     """Least-squares bicubic (by default) B-spline surface of `points` refined by knot insertion.
 
     points: (n, 3) scattered points, or a grid (rows, cols, 3) with optional `mask` (rows, cols) of valid
@@ -234,6 +244,9 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
         not data, and the residuals and the certificate are the data's alone. With `Anchors.tol`, the
         spans whose anchors are missed by more are refined too (within the same limits), and the
         refinement goes on until both hold; the bisection and the pruning keep both.
+    sides: optional labels (n,) of scattered points (two patches fitted as one, `rgm.fitters.patch_merge`):
+        the statistic must hold on each side's points on its own, or a narrow side would hide among the
+        other's (5 % of the points may lie anywhere at p95); the certificate is still the whole's.
     closed_u: scattered data only: u is an angle round a closed wrap, u = 0 and u = 1 the same points; every
         net is closed C1 across them (`rgm.fitters.freeform.closure_u`), knot insertion keeping it so.
     Refinement stops when the statistic is met; when every span that exceeds the tolerance holds fewer
@@ -250,7 +263,7 @@ def fit_surface(points, tol: float, *, mask=None, params=None, degree: int = 3,
     tolerance, the fit without it is tried and kept if it holds or comes closer: the extension never
     costs a certificate.
     """
-    prob = _SurfaceProblem(points, mask, params, degree, smoothing, statistic, anchors, closed_u)
+    prob = _SurfaceProblem(points, mask, params, degree, smoothing, statistic, anchors, closed_u, sides)
     fit = _refine(prob, tol, n_initial, max_ctrl, statistic, prune, min_lines, data_per_ctrl)
     if not fit.stats.holds and prob.extended:
         prob.extended = False
@@ -269,12 +282,12 @@ def _refine(prob, tol, n_initial, max_ctrl, statistic, prune, min_lines, data_pe
     prev, history, stopped, step, final = None, [], "", None, ""
     while True:
         ctrl, res = prob.solve(ku, kv, tol)
-        value = statistic_value(res, statistic)
+        value = prob.value(res)
         if prev is not None and value > prev[3] and prob.anchors is None:  # keep the refined previous shape
             ctrl = np.einsum("ia,abd,jb->ijd", refinement_matrix(prev[1], ku, degree), prev[0],
                              refinement_matrix(prev[2], kv, degree), optimize=True)
             res = prob.residuals(ku, kv, ctrl, tol)
-            value = statistic_value(res, statistic)
+            value = prob.value(res)
         history.append((ctrl.shape[0] * ctrl.shape[1], value))
         met = prob.anchors_met(ku, kv, ctrl)
         if (value <= tol and met) or final:
@@ -322,7 +335,7 @@ def _refine(prob, tol, n_initial, max_ctrl, statistic, prune, min_lines, data_pe
             ku2 = np.sort(np.r_[prev[1], cu[take[take < len(cu)]]])
             kv2 = np.sort(np.r_[prev[2], cv[take[take >= len(cu)] - len(cu)]])
             ctrl2, res2 = prob.solve(ku2, kv2, tol)
-            value2 = statistic_value(res2, statistic)
+            value2 = prob.value(res2)
             if value2 <= tol and prob.anchors_met(ku2, kv2, ctrl2):
                 hi = mid
                 ku, kv, ctrl, res, value = ku2, kv2, ctrl2, res2, value2
@@ -391,7 +404,7 @@ def _prune(prob, ku, kv, ctrl, res, tol, statistic, attempts, slack=0.4):
             tried.add((i < len(bu), float(bu[i] if i < len(bu) else bv[i - len(bu)])))
         ku2, kv2 = _without(ku, prob.degree, drop_u), _without(kv, prob.degree, drop_v)
         ctrl2, res2 = prob.solve(ku2, kv2, tol)
-        if statistic_value(res2, statistic) <= tol and prob.anchors_met(ku2, kv2, ctrl2):
+        if prob.value(res2) <= tol and prob.anchors_met(ku2, kv2, ctrl2):
             ku, kv, ctrl, res = ku2, kv2, ctrl2, res2
     return ku, kv, ctrl, res
 

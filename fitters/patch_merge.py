@@ -11,7 +11,8 @@ or a measured gap, so two neighbours are one patch wherever one surface serves b
 - the fit holds the certificate's statistic on *each* side's points separately (a sliver across a real
   crease would otherwise hide among the larger patch's points: 5 % of them may lie anywhere at p95);
 - it needs no more control points than the two had together (a crease fitted round by a dense net is
-  not one face).
+  not one face), or twice as many where one of the two is a closed wrap (`rgm.fitters.wrap`), whose net
+  grows by whole rows round its turn.
 
 Pairs are tried smallest first; a merged patch is tried again with its neighbours, until no pair merges.
 """
@@ -27,6 +28,10 @@ __all__ = ["neighbour_pairs", "merge_neighbours"]
 #: two patches are neighbours when at least this many of their points lie within _REACH spacings of each other
 _CONTACTS = 4
 _REACH = 2.5
+#: a closed wrap taking a neighbour may have this many times the control points the two had: its net grows by
+#: whole rows round the turn (the knot lines a strip of rim along a sixth of the turn needs cost control points
+#: all the way round)
+_WRAP_GROWTH = 2
 
 
 def neighbour_pairs(points: np.ndarray, patches: list, spacing: float) -> list[tuple[int, int]]:
@@ -46,40 +51,52 @@ def neighbour_pairs(points: np.ndarray, patches: list, spacing: float) -> list[t
     return [tuple(map(int, p)) for p in pairs[count >= _CONTACTS]]
 
 
-def _one_surface(fit, na: int, n_ctrl: int, tol: float, statistic: str) -> bool:
-    """Whether a fit of two patches' points (the first `na` of them the first patch's) serves both (module
-    docstring): it holds, each side meets `tol` at `statistic` on its own, within `n_ctrl` control points."""
-    f = fit.shape.fit
-    return (f.stats.holds and f.n_ctrl <= n_ctrl and len(f.residuals) == len(fit.indices)
-            and statistic_value(f.residuals[:na], statistic) <= tol
-            and statistic_value(f.residuals[na:], statistic) <= tol)
+def _unit(patches: list, i: int) -> tuple[int, ...]:
+    """The patches that merge as one with patch i: i alone, or both faces of its closed wrap."""
+    wrap = patches[i].base.wrap
+    return (i,) if wrap is None else tuple(t for t, q in enumerate(patches) if q.base.wrap is wrap)
+
+
+def _one_surface(faces: list, sides: list[np.ndarray], n_ctrl: int, tol: float, statistic: str) -> bool:
+    """Whether the fits `faces` of two units' points (one patch, or a closed wrap's two faces) serve both
+    (module docstring): each holds, within `n_ctrl` control points in all, and each side's points (indices
+    into the input) meet `tol` at `statistic` on their own."""
+    if not faces or sum(f.shape.fit.n_ctrl for f in faces) > n_ctrl or \
+            any(not f.shape.fit.stats.holds or len(f.shape.fit.residuals) != len(f.indices) for f in faces):
+        return False
+    indices = np.concatenate([f.indices for f in faces])
+    residuals = np.concatenate([f.shape.fit.residuals for f in faces])
+    return all(statistic_value(residuals[np.isin(indices, side)], statistic) <= tol for side in sides)
 
 
 def merge_neighbours(points: np.ndarray, patches: list, fit, spacing: float, tol: float, statistic: str):
     """(patches, notes): `patches` (PatchFits) with every pair of neighbours that one surface serves
-    merged (module docstring). `fit(indices)` -> a PatchFit of points[indices] parameterised as one
-    piece, or None when it is not one piece or no fit results. Patches of a closed wrap
-    (`base.wrap`) are left as they are: their seams are iso-lines of one surface already."""
+    merged (module docstring). `fit(indices, sides)` -> the PatchFits of points[indices] parameterised as
+    one piece (one, or a full wrap's two faces), the statistic holding on each side's points (labels
+    `sides`) on its own, [] when it is not one piece or no fit results. A closed
+    wrap's two faces merge as one (with a neighbour that is no closed wrap: the can's rolled rim's
+    slivers, which its closed surface can take, where a sliver's own surface parts from it by 1-2 mm)."""
     patches, notes, failed = list(patches), [], set()
     while True:
-        pairs = [(i, j) for i, j in neighbour_pairs(points, patches, spacing)
-                 if patches[i].base.wrap is None and patches[j].base.wrap is None]
-        pairs.sort(key=lambda ij: sorted(len(patches[k].indices) for k in ij))
+        units = {tuple(sorted((_unit(patches, i), _unit(patches, j)))) for i, j in
+                 neighbour_pairs(points, patches, spacing)}
+        units = [(a, b) for a, b in units if a != b and min(len(a), len(b)) == 1]
+        units.sort(key=lambda ab: sorted(sum(len(patches[k].indices) for k in u) for u in ab))
         merged = False
-        for i, j in pairs:
-            key = (patches[i].indices.tobytes(), patches[j].indices.tobytes())
+        for a, b in units:
+            sides = [np.concatenate([patches[k].indices for k in u]) for u in (a, b)]
+            key = tuple(side.tobytes() for side in sides)
             if key in failed:
                 continue
-            a, b = patches[i], patches[j]
-            union = fit(np.concatenate([a.indices, b.indices]))
-            if union is None or not _one_surface(union, len(a.indices), a.shape.fit.n_ctrl + b.shape.fit.n_ctrl,
-                                                 tol, statistic):
+            faces = fit(np.concatenate(sides), np.repeat([0, 1], [len(side) for side in sides]))
+            old = [patches[k].shape.fit.n_ctrl for k in a + b]
+            if not _one_surface(faces, sides, sum(old) * (_WRAP_GROWTH if len(a + b) > 2 else 1), tol, statistic):
                 failed.add(key)
                 continue
-            notes.append(f"patches of {len(a.indices)} and {len(b.indices)} points merged: one surface of "
-                         f"{union.shape.fit.n_ctrl} control points fits both (they had {a.shape.fit.n_ctrl} and "
-                         f"{b.shape.fit.n_ctrl})")
-            patches = [p for k, p in enumerate(patches) if k not in (i, j)] + [union]
+            notes.append(f"patches of {' and '.join(str(len(side)) for side in sides)} points merged: one "
+                         f"surface of {sum(f.shape.fit.n_ctrl for f in faces)} control points fits both "
+                         f"(they had {sum(old[:len(a)])} and {sum(old[len(a):])})")
+            patches = [p for k, p in enumerate(patches) if k not in a + b] + faces
             merged = True
             break
         if not merged:

@@ -33,8 +33,9 @@ merged views of a closed or wrapped part:
    again, to `_RESPLIT` splits; the halves are kept if every one holds (`_fit_piece`). YCB meat can,
    views with seeds 2-4: every patch now holds (before, pieces of the lid's corner did not), and 29-33
    seams of 40-53 are within 1 mm (20-24 of 34-44 before). Neighbouring patches that one surface serves
-   (it holds on each side's points, with no more control points than both) are then merged
-   (`rgm.fitters.patch_merge`): a seam between surfaces that part cannot be closed by any trim.
+   (it holds on each side's points, with no more control points than both, twice as many for a closed
+   wrap) are then merged (`rgm.fitters.patch_merge`): a seam between surfaces that part cannot be closed
+   by any trim. A closed wrap takes such a neighbour too (the can's mantle, slivers of its rolled rim).
 4. Neighbouring patches share their boundary curve (`rgm.fitters.shared_edges`): the piece of each face's
    trimming loop along the crease with a neighbour becomes the same described intersection,
    `intersect(surface_i, surface_j)`, one binding used by both loops, joined to the rest of each loop
@@ -231,8 +232,8 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
         patches += fits
         skipped += notes
     patches.sort(key=lambda p: -len(p.indices))
-    patches, merged = merge_neighbours(points, patches, lambda idx: fit_one_piece(points, idx, tol, statistic,
-                                                                                 max_ctrl, k, spacing),
+    patches, merged = merge_neighbours(points, patches, lambda idx, sides: fit_one_piece(
+                                           points, idx, tol, statistic, max_ctrl, k, spacing, sides),
                                        spacing, tol, statistic)
     skipped += merged
     assigned = sum(len(p.indices) for p in patches)
@@ -245,21 +246,27 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
     return PatchSet(patches, gaps, len(points) - assigned, skipped)
 
 
-def fit_one_piece(points, indices, tol: float, statistic: str, max_ctrl: int, k: int, spacing: float):
-    """A PatchFit of points[indices] parameterised as one piece over its own base (`base_parameters`, the
-    surface reaching 5 spacings past the data), or None when no single open base serves them all (a full
-    wrap, a piece left out or split) or no fit results: how two neighbours' union is tried as one patch
-    (`rgm.fitters.patch_merge`)."""
+def fit_one_piece(points, indices, tol: float, statistic: str, max_ctrl: int, k: int, spacing: float,
+                  sides=None) -> list:
+    """The PatchFits of points[indices] parameterised as one piece over its own base (`base_parameters`,
+    the surface reaching 5 spacings past the data): one, or a full wrap's two faces (`_fit_wrap`, one
+    closed surface); [] when no single base serves them all (a piece left out or split), a full wrap's
+    closed surface misses `tol`, or no fit results: how two neighbours' union is tried as one patch
+    (`rgm.fitters.patch_merge`), `sides` (len(indices),) labelling each neighbour's points, on each of
+    which the statistic must hold on its own (`rgm.fitters.freeform_surface.fit_surface`)."""
     own = pca_normals(points[indices], k)[0]
     pieces = base_parameters(points[indices], own, spacing=spacing)
-    if len(pieces) != 1 or pieces[0][3].closed or len(pieces[0][0]) != len(indices):
-        return None
+    if len(pieces) != 1 or len(pieces[0][0]) != len(indices):
+        return []
     _, u, v, base = pieces[0]
+    if base.closed:
+        return _fit_wrap(points, indices, base, (u, v), tol, statistic, max_ctrl, k, spacing, [], 0, halves=False,
+                         sides=sides)
     try:
-        return _fit_patch(points, indices, base, reach_past(points[indices], u, v, 5 * spacing), tol, statistic,
-                          max_ctrl)
+        return [_fit_patch(points, indices, base, reach_past(points[indices], u, v, 5 * spacing), tol, statistic,
+                           max_ctrl, sides=sides)]
     except GeometryError:
-        return None
+        return []
 
 
 def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, skipped, depth=_RESPLIT) -> list:
@@ -302,19 +309,20 @@ def _fit_piece(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, 
 
 
 def _fit_wrap(points, indices, base, uv, tol, statistic, max_ctrl, k, spacing, skipped, depth,
-              anchors=None) -> list:
+              anchors=None, halves: bool = True, sides=None) -> list:
     """The two faces of a full wrap (`rgm.fitters.wrap.fit_wrap`: one closed surface, two faces sharing
     its seams exactly), their Base naming their `Wrap`; where a face misses `tol`, the two halves apart,
     each parameterised over its own angle (`_fit_piece`), as said in `skipped`. `anchors` (in the wrap's
-    parameters): points the closed surface is pulled through (`_refit_round`); then no fallback ([])."""
+    parameters): points the closed surface is pulled through (`_refit_round`); then, or without `halves`,
+    no fallback ([]). `sides` (len(indices),): labels of points on each of which `tol` holds on its own."""
     from rgm.fitters.wrap import fit_wrap, seam_margin
 
     reach = 5 * spacing
     try:
         faces = fit_wrap(points[indices], *uv, tol, statistic=statistic, max_ctrl=max_ctrl, reach=reach,
-                         anchors=anchors)
+                         anchors=anchors, sides=sides)
     except GeometryError as exc:
-        if anchors is not None:
+        if anchors is not None or not halves:
             return []
         skipped.append(f"a full wrap of {len(indices)} points fitted as two halves apart: {exc}")
     else:
@@ -351,12 +359,13 @@ def _refit_wrap(points, plain, r, anchors, tol, statistic, max_ctrl, sizes, spac
     return []
 
 
-def _fit_patch(points, indices, base, params, tol, statistic, max_ctrl, anchors=None) -> PatchFit:
+def _fit_patch(points, indices, base, params, tol, statistic, max_ctrl, anchors=None, sides=None) -> PatchFit:
     """A PatchFit of points[indices] over `params` (u, v) at `tol`: the trimmed surface, timed. `anchors`
-    (`rgm.fitters.freeform.Anchors`): points the surface is pulled through (`fit_freeform`)."""
+    (`rgm.fitters.freeform.Anchors`): points the surface is pulled through; `sides`: labels of points on
+    each of which `tol` holds on its own (`fit_freeform`)."""
     t0 = time.perf_counter()
     shape = fit_freeform(points[indices], tol, statistic=statistic, max_ctrl=max_ctrl, cuts=False, params=params,
-                         anchors=anchors)
+                         anchors=anchors, sides=sides)
     return PatchFit(indices, base, shape, time.perf_counter() - t0, params)
 
 

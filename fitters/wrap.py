@@ -65,13 +65,14 @@ def seam_margin(points, u, v, reach: float) -> float:
 
 
 def fit_wrap(points, u, v, tol: float, *, statistic: str = "p95", max_ctrl: int = 4000, reach: float = 0.0,
-             anchors=None):
+             anchors=None, sides=None):
     """The two faces of a full wrap of `points` (n, 3) at parameters u (its angle over 2 pi, in [0, 1))
     and v (its height, in [0, 1]): [(data indices (k,), FreeformShape, seconds, (s, t) its data's
     parameters)], one per half (u < 1/2, u >= 1/2), both from one closed surface (module docstring) that
     reaches `reach` (model units) past the data along v and past each seam. Each face's certificate is
     its half's residuals. `anchors` (`rgm.fitters.freeform.Anchors` at the closed surface's parameters:
     u, and v as its faces have it, past the margin): points the closed surface is pulled through.
+    `sides` (n,): labels of points on each of which the statistic must hold on its own (`fit_surface`).
     Raises GeometryError when a half misses `tol` (`statistic`)."""
     from rgm.fitters.freeform_part import fit_freeform
     from rgm.fitters.freeform_surface import fit_surface
@@ -84,7 +85,7 @@ def fit_wrap(points, u, v, tol: float, *, statistic: str = "p95", max_ctrl: int 
     halves, target = [], tol
     for _ in range(_TRIES):   # the certificate is the whole wrap's: a half may miss it, then aim lower
         fit = fit_surface(points, target, params=(u, v), statistic=statistic, max_ctrl=max_ctrl, closed_u=True,
-                          anchors=anchors)
+                          anchors=anchors, sides=sides)
         halves = [_half(fit, u, start, delta, tol, statistic) for start in (0.0, 0.5)]
         missed = [(start, h) for start, h in zip((0.0, 0.5), halves) if not h[1].stats.holds]
         if not missed or fit.stopped:

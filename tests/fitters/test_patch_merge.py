@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 from scipy.spatial import cKDTree
 
@@ -19,10 +20,10 @@ def _scatter(rng, n, lo, hi):
 def _fitted(points, groups):
     spacing = median_spacing(cKDTree(points))
 
-    def fit(idx):
-        return fit_one_piece(points, idx, TOL, "p95", 2000, 16, spacing)
+    def fit(idx, sides=None):
+        return fit_one_piece(points, idx, TOL, "p95", 2000, 16, spacing, sides)
 
-    return [fit(g) for g in groups], fit, spacing
+    return [fit(g)[0] for g in groups], fit, spacing
 
 
 @settings(max_examples=6, deadline=None)
@@ -69,3 +70,45 @@ def test_two_faces_across_a_sharp_edge_stay_apart():
     assert neighbour_pairs(points, patches, spacing) == [(0, 1)]
     merged, notes = merge_neighbours(points, patches, fit, spacing, TOL, "p95")
     assert len(merged) == 2 and notes == []
+
+
+def _can(rng, flange: bool):
+    """A closed mantle (r 30 mm, 40 mm high, 0.02 mm noise) and a 60-degree strip along its top rim: a bead
+    rolled outwards (1 mm out over 4 mm of height, its normal turning up to 38 degrees, as a can's rim)
+    or a flat flange 4 mm wide (a real crease). Returns (points, mantle indices, strip indices)."""
+    t, z = rng.uniform(0, 2 * np.pi, 7500), rng.uniform(0, 40, 7500)
+    mantle = np.c_[30 * np.cos(t), 30 * np.sin(t), z]
+    t = rng.uniform(0, np.pi / 3, 150)
+    if flange:
+        r, z = rng.uniform(30.5, 34, len(t)), np.full(len(t), 40.0)
+    else:
+        z = rng.uniform(40.5, 44, len(t))
+        r = 30 + np.sin(np.pi * (z - 40) / 4)
+    strip = np.c_[r * np.cos(t), r * np.sin(t), z]
+    points = np.r_[mantle, strip] + rng.normal(0, 0.02, (len(mantle) + len(strip), 3))
+    return points, np.arange(len(mantle)), np.arange(len(mantle), len(points))
+
+
+@pytest.mark.parametrize("flange", [False, True])
+def test_a_closed_wrap_takes_a_bead_along_its_rim_but_not_a_flange(flange):
+    """A closed mantle's two faces and a strip along its rim: the rolled bead is absorbed (one closed surface,
+    two faces, meets the tolerance on the bead's points and on the mantle's each), the flange across a
+    right-angled crease is not."""
+    points, mantle, strip = _can(np.random.default_rng(5), flange)
+    spacing = median_spacing(cKDTree(points))
+
+    def fit(idx, sides=None):
+        return fit_one_piece(points, idx, TOL, "p95", 2000, 16, spacing, sides)
+
+    wrap, (bead,) = fit(mantle), fit(strip)
+    assert len(wrap) == 2 and all(face.base.wrap is wrap[0].base.wrap is not None for face in wrap)
+    merged, notes = merge_neighbours(points, wrap + [bead], fit, spacing, TOL, "p95")
+    if flange:
+        assert len(merged) == 3 and notes == []
+        return
+    assert len(merged) == 2 and len(notes) == 1
+    assert merged[0].base.wrap is merged[1].base.wrap is not None
+    assert sorted(np.concatenate([face.indices for face in merged]).tolist()) == list(range(len(points)))
+    for side in (mantle, strip):
+        off = np.concatenate([face.shape.distance(points[np.intersect1d(face.indices, side)]) for face in merged])
+        assert np.percentile(off, 95) <= TOL

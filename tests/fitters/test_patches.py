@@ -343,7 +343,9 @@ def test_mustard_bottle_views_become_patches_split_at_its_sharp_edges(tmp_path, 
     assert any("closed round its axis" in g.why and not g.shared for g in result.gaps)
     assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     # G0 as the file reads back (`rgmc verify`): every sample of every seam, beyond a shared edge's ends
-    # too. Seed 1: 13 of 13 within 1 mm, worst 0.69 mm, since the faces of a closed wrap grow (the body's
+    # too. Seeds 1 and 4: 10 of 10 within 1 mm, worst 0.80 and 0.56 mm, since the closed body takes the
+    # neighbours its surface serves (pieces of its shoulder, 240-290 points). Seed 1 before: 13 of 13
+    # within 1 mm, worst 0.69 mm, since the faces of a closed wrap grow (the body's
     # half stopped 2.49 mm above the bottom beyond the edge they share; until 2026-12-07 the count took
     # the edge alone and read 13 of 13). Seed 4: 12 of 12, worst 0.69 mm, since a grown hole follows the
     # neighbour's edge within a quarter of the tolerance and the cap's edges with its top run to the
@@ -395,10 +397,13 @@ def test_potted_meat_can_patches_share_only_edges_an_exact_intersector_finds(tmp
     result = fit_patches(p, 1.0, statistic="p95")
     assert all(s.fit.stats.holds and s.fit.stats.p95 <= 1.0 for s in result.shapes)
     shared = [g for g in result.gaps if g.shared]
-    assert len(shared) >= 4 and all(g.max <= 1.0 for g in shared)
+    # (4 shared of 35 seams until the mantle took its rim's slivers, 3 of 18 since)
+    assert len(shared) >= 3 and all(g.max <= 1.0 for g in shared)
     # G0 as the file reads back (`rgmc verify`, every sample of every seam, beyond a shared edge's ends
-    # too): 16 of 35 seams within 1 mm, worst 3.98 mm (seeds 2-4 36/65, 53/68, 39/56; at 1 mm views
-    # seeds 1-3 8/21, 13/20, 13/19), since grown holes follow a neighbour's edge within a quarter of the
+    # too): 8 of 18 seams within 1 mm, worst 3.63 mm (seeds 2-4 30/41, 41/58, 14/37; at 1 mm views seeds
+    # 1-3 6/11, 10/19, 6/12: 81 seams over 1 mm in the ten view sets of docs/fitting.md from 106), since
+    # the closed mantle takes slivers of the rolled rim that its surface serves (before: 16/35, 36/65,
+    # 53/68, 39/56; 8/21, 13/20, 13/19), since grown holes follow a neighbour's edge within a quarter of the
     # tolerance and edges run to a closed wrap's seam (before: 16/35, 45/63, 60/72, 40/52; 8/21, 13/20,
     # 11/19; the rim's slivers steer the choices: a shared stretch moved at the mantle's seam changes
     # which loops rebuild), since the faces of the closed wrap grow too (before: 20/38, 46/65,
