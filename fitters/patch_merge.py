@@ -73,9 +73,9 @@ def merge_neighbours(points: np.ndarray, patches: list, fit, spacing: float, tol
     """(patches, notes): `patches` (PatchFits) with every pair of neighbours that one surface serves
     merged (module docstring). `fit(indices, sides)` -> the PatchFits of points[indices] parameterised as
     one piece (one, or a full wrap's two faces), the statistic holding on each side's points (labels
-    `sides`) on its own, [] when it is not one piece or no fit results. A closed
-    wrap's two faces merge as one (with a neighbour that is no closed wrap: the can's rolled rim's
-    slivers, which its closed surface can take, where a sliver's own surface parts from it by 1-2 mm)."""
+    `sides`) on its own, [] when it is not one piece or no fit results. A closed wrap's two faces count
+    as one patch and take a neighbour that is no closed wrap (the YCB meat can's mantle takes slivers of
+    its rolled rim, whose own surfaces part from it by 1-2 mm); two closed wraps are not merged."""
     patches, notes, failed = list(patches), [], set()
     while True:
         units = {tuple(sorted((_unit(patches, i), _unit(patches, j)))) for i, j in
@@ -90,7 +90,8 @@ def merge_neighbours(points: np.ndarray, patches: list, fit, spacing: float, tol
                 continue
             faces = fit(np.concatenate(sides), np.repeat([0, 1], [len(side) for side in sides]))
             old = [patches[k].shape.fit.n_ctrl for k in a + b]
-            if not _one_surface(faces, sides, sum(old) * (_WRAP_GROWTH if len(a + b) > 2 else 1), tol, statistic):
+            growth = _WRAP_GROWTH if max(len(a), len(b)) > 1 else 1    # one of the two is a closed wrap
+            if not _one_surface(faces, sides, growth * sum(old), tol, statistic):
                 failed.add(key)
                 continue
             notes.append(f"patches of {' and '.join(str(len(side)) for side in sides)} points merged: one "
