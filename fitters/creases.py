@@ -38,7 +38,9 @@ def median_spacing(tree: cKDTree) -> float:
 def linked_components(points, normals, radius: float, angle_deg: float) -> np.ndarray:
     """Connected-component labels (n,) of the graph linking each point to its 8 nearest within `radius`
     whose normals agree within `angle_deg` (normals None: no normal test)."""
-    d, nb = cKDTree(points).query(points, k=min(9, len(points)), distance_upper_bound=radius, workers=-1)
+    # k as a list: (n, k) arrays even for a single point
+    d, nb = cKDTree(points).query(points, k=list(range(1, min(9, len(points)) + 1)),
+                                  distance_upper_bound=radius, workers=-1)
     linked = np.isfinite(d[:, 1:])
     pairs = np.c_[np.repeat(np.arange(len(points)), linked.sum(axis=1)), nb[:, 1:][linked]]
     if normals is not None:

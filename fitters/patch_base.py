@@ -13,7 +13,8 @@ from scipy.spatial import cKDTree
 from rgm.errors import GeometryError
 from rgm.fitters.creases import checked_points, linked_components, median_spacing, unit_rows
 
-__all__ = ["Base", "Wrap", "base_parameters", "reach_past", "reach_margins", "unit_box"]
+__all__ = ["Base", "Wrap", "base_parameters", "cylinder_frame", "goes_round", "reach_past", "reach_margins",
+           "turn_start", "unit_box"]
 
 
 @dataclass(frozen=True)
@@ -54,8 +55,10 @@ def _plane(points, normals):
     return uv, float(np.quantile(np.abs(normals @ vt[2]), 0.01))
 
 
-def _cylinder(points, normals):
-    """Axis frame (centre (3,), e1, e2, axis) from the normals, and the agreement of the radial direction."""
+def cylinder_frame(points, normals):
+    """(centre (2,) in the basis, basis (3, 2), axis (3,), agreement) of a cylinder-like patch: the axis the
+    direction most nearly perpendicular to all `normals`, the centre the normal lines' least-squares meeting
+    point across it, the agreement the 1st percentile of |n . radial|."""
     vec = np.linalg.eigh(normals.T @ normals)[1]
     axis, e1, e2 = vec[:, 0], vec[:, 1], vec[:, 2]
     p2 = points @ np.c_[e1, e2]
@@ -82,19 +85,14 @@ def base_parameters(points, normals, *, max_angle: float = 75.0, spacing: float 
     uv, agree_plane = _plane(points, normals)
     if agree_plane >= limit:
         return [(idx, *unit_box(uv), Base("plane", agree_plane))]
-    centre2, basis, axis, agree_cyl = _cylinder(points, normals)
+    centre2, basis, axis, agree_cyl = cylinder_frame(points, normals)
     if agree_cyl >= limit or depth == 0:
         if agree_cyl < agree_plane:
             return [(idx, *unit_box(uv), Base("plane", agree_plane))]
         d2 = points @ basis - centre2
         theta = np.arctan2(d2[:, 1], d2[:, 0])
-        s = np.sort(theta)
-        gaps = np.diff(np.r_[s, s[0] + 2 * np.pi])
-        g = int(np.argmax(gaps))
-        wrap_limit = 4 * spacing / max(float(np.median(np.linalg.norm(d2, axis=1))), 1e-12)
-        start = s[(g + 1) % len(s)]
-        t = np.mod(theta - start, 2 * np.pi)
-        if gaps[g] > wrap_limit or depth == 0:
+        t = np.mod(theta - turn_start(theta), 2 * np.pi)
+        if not goes_round(theta, np.linalg.norm(d2, axis=1), spacing) or depth == 0:
             return [(idx, *unit_box(np.c_[t, points @ axis]), Base("cylinder", agree_cyl))]
         # a full wrap: one surface closed round the axis (`rgm.fitters.wrap`), u its angle
         height = unit_box(np.c_[t, points @ axis])[1]
@@ -114,6 +112,19 @@ def base_parameters(points, normals, *, max_angle: float = 75.0, spacing: float 
                                                spacing=spacing, depth=depth - 1):
             out.append((part[sub], u, v, base))
     return out
+
+
+def goes_round(theta, rho, spacing: float) -> bool:
+    """Whether points at angles `theta` (n,) and distances `rho` (n,) from an axis go all the way round it:
+    no gap between their angles wider than 4 point `spacing`s at their median distance."""
+    s = np.sort(theta)
+    return bool(np.diff(np.r_[s, s[0] + 2 * np.pi]).max() <= 4 * spacing / max(float(np.median(rho)), 1e-12))
+
+
+def turn_start(theta) -> float:
+    """The angle just past the widest gap between angles `theta` (n,) round the circle: where u = 0."""
+    s = np.sort(theta)
+    return float(s[(int(np.argmax(np.diff(np.r_[s, s[0] + 2 * np.pi]))) + 1) % len(s)])
 
 
 def reach_past(points, u, v, reach: float, most: float = 0.2) -> tuple[np.ndarray, np.ndarray]:

@@ -35,7 +35,8 @@ merged views of a closed or wrapped part:
    seams of 40-53 are within 1 mm (20-24 of 34-44 before). Neighbouring patches that one surface serves
    (it holds on each side's points, with no more control points than both, twice as many for a closed
    wrap) are then merged (`rgm.fitters.patch_merge`): a seam between surfaces that part cannot be closed
-   by any trim. A closed wrap takes such a neighbour too (the can's mantle, slivers of its rolled rim).
+   by any trim. A closed wrap takes such a neighbour too (the can's mantle, slivers of its rolled rim),
+   and a rim its profile rolls over into, parameterised along that profile (`rgm.fitters.patch_sweep`).
 4. Neighbouring patches share their boundary curve (`rgm.fitters.shared_edges`): the piece of each face's
    trimming loop along the crease with a neighbour becomes the same described intersection,
    `intersect(surface_i, surface_j)`, one binding used by both loops, joined to the rest of each loop
@@ -102,7 +103,8 @@ from rgm.fitters.freeform_measure import TrimmedNurbs
 from rgm.fitters.freeform_part import FreeformShape, fit_freeform, retrimmed, trim_parameters
 from rgm.fitters.normals import pca_normals
 from rgm.fitters.patch_base import Base, Wrap, base_parameters, reach_past
-from rgm.fitters.patch_merge import merge_neighbours
+from rgm.fitters.patch_merge import merge_neighbours, take_rims
+from rgm.fitters.patch_sweep import rims, swept_parameters
 from rgm.fitters.trimloops import check_loops
 
 __all__ = ["PatchFit", "Gap", "PatchSet", "fit_patches", "seam_anchors", "boundary_samples", "as_written",
@@ -232,10 +234,15 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
         patches += fits
         skipped += notes
     patches.sort(key=lambda p: -len(p.indices))
-    patches, merged = merge_neighbours(points, patches, lambda idx, sides: fit_one_piece(
-                                           points, idx, tol, statistic, max_ctrl, k, spacing, sides),
-                                       spacing, tol, statistic)
-    skipped += merged
+
+    def fit_union(idx, sides=None):
+        return fit_one_piece(points, idx, tol, statistic, max_ctrl, k, spacing, sides)
+
+    patches, taken = take_rims(points, patches, fit_union,
+                               lambda idx, sides: rims(points[idx], pca_normals(points[idx], k)[0], spacing, sides),
+                               spacing, tol, statistic)
+    patches, merged = merge_neighbours(points, patches, fit_union, spacing, tol, statistic)
+    skipped += taken + merged
     assigned = sum(len(p.indices) for p in patches)
     gaps = g0_gaps(points, patches, 5 * spacing)
     if share:
@@ -249,16 +256,20 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
 def fit_one_piece(points, indices, tol: float, statistic: str, max_ctrl: int, k: int, spacing: float,
                   sides=None) -> list:
     """The PatchFits of points[indices] parameterised as one piece over its own base (`base_parameters`,
-    the surface reaching 5 spacings past the data): one, or a full wrap's two faces (`_fit_wrap`, one
-    closed surface); [] when no single base serves them all (a piece left out or split), a full wrap's
-    closed surface misses `tol`, or no fit results: how two neighbours' union is tried as one patch
+    the surface reaching 5 spacings past the data; where that splits them, a wrap swept along its profile,
+    `swept_parameters`): one, or a full wrap's two faces (`_fit_wrap`, one closed surface); [] when no
+    single base serves them all (a piece left out or split, and no sweep), a full wrap's closed surface
+    misses `tol`, or no fit results: how two neighbours' union is tried as one patch
     (`rgm.fitters.patch_merge`), `sides` (len(indices),) labelling each neighbour's points, on each of
     which the statistic must hold on its own (`rgm.fitters.freeform_surface.fit_surface`)."""
     own = pca_normals(points[indices], k)[0]
     pieces = base_parameters(points[indices], own, spacing=spacing)
-    if len(pieces) != 1 or len(pieces[0][0]) != len(indices):
+    if len(pieces) == 1 and len(pieces[0][0]) == len(indices):
+        _, u, v, base = pieces[0]
+    elif (swept := swept_parameters(points[indices], own, spacing, sides)) is not None:
+        u, v, base = swept
+    else:
         return []
-    _, u, v, base = pieces[0]
     if base.closed:
         return _fit_wrap(points, indices, base, (u, v), tol, statistic, max_ctrl, k, spacing, [], 0, halves=False,
                          sides=sides)
