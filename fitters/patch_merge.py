@@ -17,7 +17,8 @@ or a measured gap, so two neighbours are one patch wherever one surface serves b
 
 Pairs are tried smallest first; a merged patch is tried again with its neighbours, until no pair merges.
 Before the pairs, each closed wrap is offered all the neighbours that keep to its rim at once
-(`take_rims`): a rolled rim the crease finder left in a string of pieces is one roll all the way round.
+(`take_rims`): a rolled rim the crease finder left in a string of pieces is one roll all the way round;
+a wrap so swept then claims the points of other patches that its surface runs through (`claim_rims`).
 """
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ from scipy.spatial import cKDTree
 
 from rgm.fitters.freeform import statistic_value
 
-__all__ = ["neighbour_pairs", "merge_neighbours", "take_rims"]
+__all__ = ["claim_rims", "neighbour_pairs", "merge_neighbours", "take_rims"]
 
 #: two patches are neighbours when at least this many of their points lie within _REACH spacings of each other
 _CONTACTS = 4
@@ -115,10 +116,10 @@ def take_rims(points: np.ndarray, patches: list, fit, rims, spacing: float, tol:
     1.5 mm views, seed 3: thirteen pieces of 16-264 points). Taken one at a time, a piece along part of
     the turn makes the wrap's closed surface grow whole rows and columns to place the roll only there
     (4,700 control points from 1,000, refused); taken together they are the roll all the way round, one
-    sweep along the profile (`rgm.fitters.patch_sweep`): 910 control points from 608. `rims(indices, sides)` -> the labels of the sides
-    (each neighbour's points; label 0 the wrap's) that keep to its rim; `fit` as for `merge_neighbours`.
-    The wrap takes them where its fit holds on every side on its own, within twice the control points
-    they had; otherwise the pairwise merge still tries each."""
+    sweep along the profile (`rgm.fitters.patch_sweep`): 910 control points from 608. `rims(indices,
+    sides)` -> the labels of the sides (each neighbour's points; label 0 the wrap's) that keep to its rim;
+    `fit` as for `merge_neighbours`. The wrap takes them where its fit holds on every side on its own,
+    within twice the control points they had; otherwise the pairwise merge still tries each."""
     notes, tried = [], set()
     while True:
         for wrap in sorted({_unit(patches, i) for i in range(len(patches))}):
@@ -144,6 +145,46 @@ def take_rims(points: np.ndarray, patches: list, fit, rims, spacing: float, tol:
             break
         else:
             return patches, notes
+
+
+def claim_rims(points: np.ndarray, patches: list, fit, on_profile, tol: float):
+    """(patches, notes): the points of other patches that a swept wrap's surface runs through, handed to it.
+
+    The crease finder sets the points of a tight roll's creases by their tangent planes, and on the YCB
+    meat can a few hundred of the flare's and the inner wall's points went to the lid's pieces: fitted over
+    planes, these bent down to pass them and met the swept rim along no clean intersection. Once the wrap
+    is swept along its profile (`take_rims`), a point of another patch goes to it where it lies on the
+    wrap's profile (`on_profile(indices, sides)` -> mask, label 0 the wrap's points) and within `tol` / 2
+    of its surface. The wrap is fitted again with them (at most twice its control points), each patch
+    that gave points with the rest (left out under 16), and the hand-over is kept where every fit holds.
+    `fit(indices, sides)` as for `merge_neighbours`."""
+    notes = []
+    for wrap in sorted({_unit(patches, i) for i in range(len(patches))}):
+        if len(wrap) == 1 or patches[wrap[0]].base.kind != "swept":
+            continue
+        mine = np.concatenate([patches[r].indices for r in wrap])
+        others = [r for r in range(len(patches)) if r not in wrap and patches[r].base.wrap is None]
+        theirs = np.concatenate([patches[r].indices for r in others] + [np.zeros(0, int)])
+        on = on_profile(np.r_[mine, theirs], _labels([mine, theirs]))[len(mine):] if len(theirs) else theirs
+        if not np.any(on):
+            continue
+        near = np.min([patches[r].shape.distance(points[theirs[on]]) for r in wrap], axis=0)
+        take = theirs[np.flatnonzero(on)[near <= tol / 2]]
+        donors = [r for r in others if np.isin(patches[r].indices, take).any()]
+        faces = fit(np.r_[mine, take], _labels([mine, take])) if len(take) >= 4 else []
+        if not faces or not all(f.shape.fit.stats.holds for f in faces) or \
+                sum(f.shape.fit.n_ctrl for f in faces) > _WRAP_GROWTH * sum(patches[r].shape.fit.n_ctrl for r in wrap):
+            continue
+        rest = [np.setdiff1d(patches[r].indices, take) for r in donors]
+        refits = [fit(left, None) if len(left) >= 16 else [] for left in rest]
+        if any(len(left) >= 16 and not (got and all(f.shape.fit.stats.holds for f in got))
+               for left, got in zip(rest, refits)):
+            continue
+        notes.append(f"a swept wrap took {len(take)} points of {len(donors)} patches that its surface runs "
+                     f"through on its profile ({sum(len(left) < 16 for left in rest)} of them left out)")
+        patches = [p for r, p in enumerate(patches) if r not in set(wrap) | set(donors)] + faces + \
+            [f for got in refits for f in got]
+    return patches, notes
 
 
 def _labels(sides: list[np.ndarray]) -> np.ndarray:

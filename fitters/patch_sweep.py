@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 
 from rgm.fitters.patch_base import Base, cylinder_frame, goes_round, turn_start, unit_box
 
-__all__ = ["rims", "swept_parameters"]
+__all__ = ["on_profile", "rims", "swept_parameters"]
 
 #: how far a side a sweep takes may lie from the wrap's cross-section, as a share of its distance from the axis:
 #: a rim keeps near the section, an end (a lid, a bottom) runs in towards the axis
@@ -88,6 +88,21 @@ def rims(points, normals, spacing: float, sides, frame=None) -> np.ndarray:
     off = _along(path, frame.q)[1]
     return np.array([side for side in shallow
                      if np.quantile(off[frame.sides == side], 0.95) <= _OFF_PROFILE * spacing], dtype=frame.rest.dtype)
+
+
+def on_profile(points, normals, spacing: float, sides) -> np.ndarray:
+    """(n,) bool: the points of the sides but the largest, a swept wrap (labels `sides` (n,)), that lie on
+    the wrap's own profile (within a point `spacing` of the profile of its points alone, and more than a
+    spacing from either end of it, where the wrap meets its ends across their creases) and keep to its
+    rim (within _RIM of the section): where the wrap's surface runs through another patch's points."""
+    frame = _Section(points, normals, spacing, sides)
+    path = _profile_path(frame.q[frame.main], spacing / 2) if frame.round else None
+    if path is None:
+        return np.zeros(len(frame.q), bool)
+    s, off = _along(path, frame.q)
+    length = np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1))
+    return ~frame.main & (off <= spacing) & (s > spacing) & (s < length - spacing) & \
+        (np.abs(frame.q[:, 0]) <= _RIM * frame.radius)
 
 
 class _Section:

@@ -36,7 +36,9 @@ merged views of a closed or wrapped part:
    (it holds on each side's points, with no more control points than both, twice as many for a closed
    wrap) are then merged (`rgm.fitters.patch_merge`): a seam between surfaces that part cannot be closed
    by any trim. A closed wrap takes such a neighbour too (the can's mantle, slivers of its rolled rim),
-   and a rim its profile rolls over into, parameterised along that profile (`rgm.fitters.patch_sweep`).
+   and a rim its profile rolls over into, parameterised along that profile (`rgm.fitters.patch_sweep`),
+   all the rim's pieces at once; a swept wrap then claims the points of other patches its surface runs
+   through on its profile (`rgm.fitters.patch_merge.claim_rims`).
 4. Neighbouring patches share their boundary curve (`rgm.fitters.shared_edges`): the piece of each face's
    trimming loop along the crease with a neighbour becomes the same described intersection,
    `intersect(surface_i, surface_j)`, one binding used by both loops, joined to the rest of each loop
@@ -103,8 +105,8 @@ from rgm.fitters.freeform_measure import TrimmedNurbs
 from rgm.fitters.freeform_part import FreeformShape, fit_freeform, retrimmed, trim_parameters
 from rgm.fitters.normals import pca_normals
 from rgm.fitters.patch_base import Base, Wrap, base_parameters, reach_past
-from rgm.fitters.patch_merge import merge_neighbours, take_rims
-from rgm.fitters.patch_sweep import rims, swept_parameters
+from rgm.fitters.patch_merge import claim_rims, merge_neighbours, take_rims
+from rgm.fitters.patch_sweep import on_profile, rims, swept_parameters
 from rgm.fitters.trimloops import check_loops
 
 __all__ = ["PatchFit", "Gap", "PatchSet", "fit_patches", "seam_anchors", "boundary_samples", "as_written",
@@ -241,8 +243,10 @@ def fit_patches(points, tol: float, *, statistic: str = "p95", normals=None, ang
     patches, taken = take_rims(points, patches, fit_union,
                                lambda idx, sides: rims(points[idx], pca_normals(points[idx], k)[0], spacing, sides),
                                spacing, tol, statistic)
+    patches, claimed = claim_rims(points, patches, fit_union, lambda idx, sides: on_profile(
+        points[idx], pca_normals(points[idx], k)[0], spacing, sides), tol)
     patches, merged = merge_neighbours(points, patches, fit_union, spacing, tol, statistic)
-    skipped += taken + merged
+    skipped += taken + claimed + merged
     assigned = sum(len(p.indices) for p in patches)
     gaps = g0_gaps(points, patches, 5 * spacing)
     if share:

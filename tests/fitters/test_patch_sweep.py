@@ -9,8 +9,8 @@ from scipy.spatial import cKDTree
 from rgm.fitters.creases import median_spacing
 from rgm.fitters.normals import pca_normals
 from rgm.fitters.patch_base import base_parameters
-from rgm.fitters.patch_merge import take_rims
-from rgm.fitters.patch_sweep import rims, swept_parameters
+from rgm.fitters.patch_merge import claim_rims, take_rims
+from rgm.fitters.patch_sweep import on_profile, rims, swept_parameters
 from rgm.fitters.patches import _fit_piece, fit_one_piece
 
 TOL = 0.2   # mm
@@ -165,3 +165,41 @@ def test_a_band_beside_the_profile_is_no_rim():
         normals = pca_normals(points[idx], 16)[0]
         assert rims(points[idx], normals, spacing, sides).tolist() == want
         assert (swept_parameters(points[idx], normals, spacing, sides) is None) == (want != [1] * len(others))
+
+
+def test_a_swept_wrap_claims_the_points_of_its_roll_a_lid_took():
+    """Points of the start of the can's roll (40 % of its first 60 degrees, among the wrap's own) went to a
+    flat lid across the mantle's top (as the crease finder hands a tight roll's crease points to the lid's
+    tangent plane): once mantle and roll are swept, the wrap takes them back, each side within the
+    tolerance, and the lid keeps its own."""
+    points, mantle, bead, _, arc = _can(np.random.default_rng(9), 1.2)
+    rng = np.random.default_rng(10)
+    centre = points[mantle, :2].mean(axis=0)
+    ring = points[mantle[:1500], :2] - centre
+    disc = ring * rng.uniform(0.3, 0.95, (len(ring), 1))
+    lid_xy = np.r_[disc + centre]
+    points = np.r_[points, np.c_[lid_xy, np.full(len(lid_xy), 12.0)] + rng.normal(0, 0.02, (len(lid_xy), 3))]
+    lid = np.arange(len(points) - len(lid_xy), len(points))
+    early = bead[arc < np.pi / 3 * 1.2]                  # the roll's first 60 degrees: 40 % of them to the lid
+    start = early[rng.uniform(size=len(early)) < 0.4]
+    spacing = median_spacing(cKDTree(points))
+
+    def fit(idx, sides=None):
+        return fit_one_piece(points, idx, TOL, "p95", 4000, 16, spacing, sides)
+
+    wrap_idx = np.r_[mantle, np.setdiff1d(bead, start)]
+    wrap = fit(wrap_idx, np.r_[np.zeros(len(mantle), int), np.ones(len(wrap_idx) - len(mantle), int)])
+    lid_fit = fit(np.r_[lid, start])
+    assert len(wrap) == 2 and wrap[0].base.kind == "swept" and len(lid_fit) == 1
+    claimed, notes = claim_rims(points, wrap + lid_fit, fit, lambda idx, sides: on_profile(
+        points[idx], pca_normals(points[idx], 16)[0], spacing, sides), TOL)
+    assert len(notes) == 1
+    faces = [p for p in claimed if p.base.wrap is not None]
+    (rest,) = [p for p in claimed if p.base.wrap is None]
+    took = np.concatenate([f.indices for f in faces])
+    # most of them (those within a point spacing of the wrap's profile and half the tolerance of its surface)
+    assert np.isin(start, took).mean() >= 0.5 and not np.isin(lid, took).any()
+    assert rest.shape.fit.stats.holds and np.isin(lid, rest.indices).all()
+    for side in (mantle, start):
+        off = np.concatenate([f.shape.distance(points[np.intersect1d(f.indices, side)]) for f in faces])
+        assert np.percentile(off, 95) <= TOL
