@@ -158,33 +158,40 @@ def claim_rims(points: np.ndarray, patches: list, fit, on_profile, tol: float):
     of its surface. The wrap is fitted again with them (at most twice its control points), each patch
     that gave points with the rest (left out under 16), and the hand-over is kept where every fit holds.
     `fit(indices, sides)` as for `merge_neighbours`."""
-    notes = []
-    for wrap in sorted({_unit(patches, i) for i in range(len(patches))}):
-        if len(wrap) == 1 or patches[wrap[0]].base.kind != "swept":
-            continue
-        mine = np.concatenate([patches[r].indices for r in wrap])
-        others = [r for r in range(len(patches)) if r not in wrap and patches[r].base.wrap is None]
-        theirs = np.concatenate([patches[r].indices for r in others] + [np.zeros(0, int)])
-        on = on_profile(np.r_[mine, theirs], _labels([mine, theirs]))[len(mine):] if len(theirs) else theirs
-        if not np.any(on):
-            continue
-        near = np.min([patches[r].shape.distance(points[theirs[on]]) for r in wrap], axis=0)
-        take = theirs[np.flatnonzero(on)[near <= tol / 2]]
-        donors = [r for r in others if np.isin(patches[r].indices, take).any()]
-        faces = fit(np.r_[mine, take], _labels([mine, take])) if len(take) >= 4 else []
-        if not faces or not all(f.shape.fit.stats.holds for f in faces) or \
-                sum(f.shape.fit.n_ctrl for f in faces) > _WRAP_GROWTH * sum(patches[r].shape.fit.n_ctrl for r in wrap):
-            continue
-        rest = [np.setdiff1d(patches[r].indices, take) for r in donors]
-        refits = [fit(left, None) if len(left) >= 16 else [] for left in rest]
-        if any(len(left) >= 16 and not (got and all(f.shape.fit.stats.holds for f in got))
-               for left, got in zip(rest, refits)):
-            continue
-        notes.append(f"a swept wrap took {len(take)} points of {len(donors)} patches that its surface runs "
-                     f"through on its profile ({sum(len(left) < 16 for left in rest)} of them left out)")
-        patches = [p for r, p in enumerate(patches) if r not in set(wrap) | set(donors)] + faces + \
-            [f for got in refits for f in got]
-    return patches, notes
+    notes, tried = [], set()
+    while True:
+        for wrap in sorted({_unit(patches, i) for i in range(len(patches))}):
+            key = b"".join(patches[r].indices.tobytes() for r in wrap)
+            if len(wrap) == 1 or patches[wrap[0]].base.kind != "swept" or key in tried:
+                continue
+            tried.add(key)
+            mine = np.concatenate([patches[r].indices for r in wrap])
+            others = [r for r in range(len(patches)) if r not in wrap and patches[r].base.wrap is None]
+            theirs = np.concatenate([patches[r].indices for r in others] + [np.zeros(0, int)])
+            on = on_profile(np.r_[mine, theirs], _labels([mine, theirs]))[len(mine):] if len(theirs) else theirs
+            if not np.any(on):
+                continue
+            near = np.min([patches[r].shape.distance(points[theirs[on]]) for r in wrap], axis=0)
+            take = theirs[np.flatnonzero(on)[near <= tol / 2]]
+            donors = [r for r in others if np.isin(patches[r].indices, take).any()]
+            faces = fit(np.r_[mine, take], _labels([mine, take])) if len(take) >= 4 else []
+            most = _WRAP_GROWTH * sum(patches[r].shape.fit.n_ctrl for r in wrap)
+            if not faces or not all(f.shape.fit.stats.holds for f in faces) or \
+                    sum(f.shape.fit.n_ctrl for f in faces) > most:
+                continue
+            rest = [np.setdiff1d(patches[r].indices, take) for r in donors]
+            refits = [fit(left, None) if len(left) >= 16 else [] for left in rest]
+            if any(len(left) >= 16 and not (got and all(f.shape.fit.stats.holds for f in got))
+                   for left, got in zip(rest, refits)):
+                continue
+            notes.append(f"a swept wrap took {len(take)} points of {len(donors)} patches that its surface runs "
+                         f"through on its profile ({sum(len(left) < 16 for left in rest)} of them left out)")
+            tried.add(b"".join(f.indices.tobytes() for f in faces))      # claimed once
+            patches = [p for r, p in enumerate(patches) if r not in set(wrap) | set(donors)] + faces + \
+                [f for got in refits for f in got]
+            break
+        else:
+            return patches, notes
 
 
 def _labels(sides: list[np.ndarray]) -> np.ndarray:
