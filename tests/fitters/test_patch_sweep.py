@@ -203,3 +203,21 @@ def test_a_swept_wrap_claims_the_points_of_its_roll_a_lid_took():
     for side in (mantle, start):
         off = np.concatenate([f.shape.distance(points[np.intersect1d(f.indices, side)]) for f in faces])
         assert np.percentile(off, 95) <= TOL
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), n=st.integers(16, 400), flat=st.booleans(), split=st.integers(1, 15))
+def test_any_union_gets_parameters_in_the_unit_square_or_none(seed, n, flat, split):
+    """The merge tries the sweep on whatever union a base does not serve: on random clouds (flat, or a
+    noisy tube with a random side cut off) it returns None or parameters in [0, 1]², never an error."""
+    rng = np.random.default_rng(seed)
+    t, z = rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 5, n)
+    points = np.c_[rng.uniform(-5, 5, (n, 2)), rng.normal(0, 0.01, n)] if flat else \
+        np.c_[4 * np.cos(t), 4 * np.sin(t), z] + rng.normal(0, 0.05, (n, 3))
+    sides = (np.arange(n) < split).astype(int)
+    spacing = median_spacing(cKDTree(points))
+    out = swept_parameters(points, pca_normals(points, min(16, n))[0], spacing, sides)
+    if out is not None:
+        u, v, base = out
+        assert base.closed and np.all((u >= 0) & (u < 1)) and np.all((v >= 0) & (v <= 1))
+    assert len(rims(points, pca_normals(points, min(16, n))[0], spacing, sides)) <= 1
