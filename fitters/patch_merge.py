@@ -92,7 +92,7 @@ def merge_neighbours(points: np.ndarray, patches: list, fit, spacing: float, tol
             key = tuple(side.tobytes() for side in sides)
             if key in failed:
                 continue
-            faces = fit(np.concatenate(sides), np.repeat([0, 1], [len(side) for side in sides]))
+            faces = fit(np.concatenate(sides), _labels(sides))
             old = [patches[k].shape.fit.n_ctrl for k in a + b]
             growth = _WRAP_GROWTH if max(len(a), len(b)) > 1 else 1    # one of the two is a closed wrap
             if not _one_surface(faces, sides, growth * sum(old), tol, statistic):

@@ -55,10 +55,8 @@ def swept_parameters(points, normals, spacing: float, sides=None):
     along one profile, or where a side but the largest (labels `sides` (n,)) is no rim (`rims`).
     `spacing`: the point spacing (model units)."""
     frame = _Section(points, normals, spacing, sides)
-    if not frame.round or len(rims(points, normals, spacing, sides, frame)) < len(frame.rest):
-        return None
-    path = _profile_path(frame.q, spacing / 2)
-    if path is None:
+    taken, path = _rims(frame, spacing)       # with every side a rim, the path is all the points' profile
+    if len(taken) < len(frame.rest) or path is None:
         return None
     if path[0, 1] > path[-1, 1]:                      # v runs up the axis
         path = path[::-1]
@@ -69,25 +67,31 @@ def swept_parameters(points, normals, spacing: float, sides=None):
     return u, unit_box(np.c_[u, s])[1], Base("swept", frame.agree, closed=True)
 
 
-def rims(points, normals, spacing: float, sides, frame=None) -> np.ndarray:
+def rims(points, normals, spacing: float, sides) -> np.ndarray:
     """The labels (sorted) of the sides of `points` (labels `sides` (n,)) but the largest, a closed wrap,
     that keep to its rim: each runs in from the wrap's cross-section by at most _RIM of the points'
     median distance from the axis (the 95th percentile of its |offset|: a roll, a bead, a flange as
     narrow, not an end such as a lid or a bottom across a crease, which stays a face of its own) and
     lies along the profile of the wrap and those sides (its points' 95th percentile distance to it within
     _OFF_PROFILE point spacings: not a few of the lid's points along the rim); none where the wrap does
-    not go round. `frame`: the `_Section` of these arguments, when made already."""
-    frame = frame or _Section(points, normals, spacing, sides)
-    if not frame.round or len(frame.rest) == 0:
-        return frame.rest[:0]
+    not go round."""
+    return _rims(_Section(points, normals, spacing, sides), spacing)[0]
+
+
+def _rims(frame, spacing: float):
+    """(the labels `rims` returns, the profile path of the wrap and its shallow sides, None if none) of a
+    `_Section`."""
+    if not frame.round:
+        return frame.rest[:0], None
     w = np.abs(frame.q[:, 0])
     shallow = [side for side in frame.rest if np.quantile(w[frame.sides == side], 0.95) <= _RIM * frame.radius]
     path = _profile_path(frame.q[frame.main | np.isin(frame.sides, shallow)], spacing / 2)
-    if path is None:
-        return frame.rest[:0]
+    if path is None or len(frame.rest) == 0:
+        return frame.rest[:0], path
     off = _along(path, frame.q)[1]
     return np.array([side for side in shallow
-                     if np.quantile(off[frame.sides == side], 0.95) <= _OFF_PROFILE * spacing], dtype=frame.rest.dtype)
+                     if np.quantile(off[frame.sides == side], 0.95) <= _OFF_PROFILE * spacing],
+                    dtype=frame.rest.dtype), path
 
 
 def on_profile(points, normals, spacing: float, sides) -> np.ndarray:
