@@ -61,7 +61,9 @@ merged views of a closed or wrapped part:
    still meeting its own certificate; a patch with a shared edge is held to it. The set is shared and
    measured again, and kept by groups, by patch and as a whole only where it brings more seams within the
    tolerance, for up to `_ROUNDS` rounds. Last, seams whose surfaces do not cross along them may share
-   one curve midway between the two surfaces (`rgm.fitters.seam_curves`), a closed wrap's two faces are
+   one curve midway between the two surfaces (`rgm.fitters.seam_curves`), and so may a shared seam left
+   open beyond its intersection's ends (where the intersection follows only part of it: the YCB meat
+   can's mantle meets its bottom along a fillet), a closed wrap's two faces are
    refitted as one surface, and each shared intersection is checked as the file reads back (`_unclosed`:
    where surfaces nearly touch, marching at the tolerance is sensitive to the last printed digit) and
    unshared where it does not close. Every surface is held, where it reaches past its data, to bend no
@@ -465,15 +467,18 @@ def _share_and_refit(points, patches, gaps, tol, statistic, max_ctrl, spacing):
         return as_written(points, copy, out, near), copy
 
     def with_curves(fits, result, gaps):
-        # the seams still over the tolerance whose intersection cannot be shared: one curve midway between
-        # the surfaces, in both loops, where one lies within the tolerance of both; the pairs shared before
-        # are shared again as they were (their candidates cached), the rest kept as measured
-        if not any(g.max > tol for g in gaps):
+        # the seams still over the tolerance whose intersection cannot be shared, and the shared ones left
+        # open beyond their edge's ends: one curve midway between the surfaces, in both loops, where one lies
+        # within the tolerance of both; the other pairs shared before are shared again as they were (their
+        # candidates cached), the rest kept as measured
+        if not any(g.worst > tol for g in gaps):
             return result, gaps
         copy = [PatchFit(q.indices, q.base, q.shape, q.seconds, q.params) for q in fits]
         tried = [replace(g, max=g.before, shared=False) if g.shared else g for g in gaps
                  if (g.shared or g.max > tol) and not _twins(fits, g.i, g.j)]
-        done = {(g.i, g.j): g for g in share_boundaries(points, copy, tried, tol, near, spacing, cache, curves=True)}
+        open_ends = {(g.i, g.j) for g in gaps if g.shared and not g.curve and g.rest > tol}
+        done = {(g.i, g.j): g for g in share_boundaries(points, copy, tried, tol, near, spacing, cache, curves=True,
+                                                         open_ends=open_ends)}
         out = as_written(points, copy, [done.get((g.i, g.j), g) for g in gaps], near)
         if _score(out, tol) > _score(gaps, tol):
             return copy, out

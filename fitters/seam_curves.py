@@ -14,7 +14,10 @@ the seam; only the trims are apart. Here such a seam becomes one curve that both
    t the crossing angle, and the distances to the surfaces by (1 - cos t) / 2) and into the middle of their
    closest approach where they do not.
 2. The stretch both faces border (the other face's seam samples located on it) is fitted by a cubic
-   B-spline to a twentieth of the tolerance (`fit_curve`: knots inserted where it is exceeded).
+   B-spline to a twentieth of the tolerance (`fit_curve`: knots inserted where it is exceeded). Where the
+   surfaces part by more than the tolerance along it, the curve keeps the longest stretch where they pass
+   within `_WITHIN` of it, and both faces' runs are cut to that stretch: beyond its ends they keep their
+   data pieces (YCB meat can: the lid's pieces meet the mantle's rolled rim along part of their seam).
 3. Each back end takes a 3-D trimming curve's closest points on its face's surface, so the two faces'
    edges lie at most d_i + d_j apart, d being the curve's distance from each surface: the curve is used
    only if d_i + d_j <= the tolerance at dense samples, and its closest points on each surface do not
@@ -37,6 +40,7 @@ _ROUNDS = 8         # alternating closest-point rounds
 _FIT = 20           # the curve is fitted to tol / _FIT
 _SAMPLES = 400      # dense samples of the curve: its distance to both surfaces, each face's uv of it
 _JUMP = 8           # a step between consecutive closest points this many times their median is a jump
+_WITHIN = 0.8       # the curve runs where the surfaces pass within this share of the tolerance of each other
 
 
 def _midway(si, sj, x):
@@ -46,6 +50,14 @@ def _midway(si, sj, x):
     for _ in range(_ROUNDS):
         x = 0.5 * (np.asarray(closest_point_surface(si, x)[2]) + np.asarray(closest_point_surface(sj, x)[2]))
     return x
+
+
+def _apart(si, sj, x) -> np.ndarray:
+    """(k,) the distances of points x (k, 3), midway between surfaces si and sj, to both surfaces summed:
+    how far apart the surfaces pass there."""
+    from rgm.geometry.inversion import closest_point_surface
+
+    return np.asarray(closest_point_surface(si, x)[3]) + np.asarray(closest_point_surface(sj, x)[3])
 
 
 def curve_edge(surface, curve, m: int = _SAMPLES):
@@ -99,13 +111,29 @@ def seam_curve(i: int, j: int, shapes, loops, runs, tol: float, near: float, spa
     # face a's run stays data, joined at the curve's ends)
     k = cKDTree(mid[moved.idx]).query(loops[b].xyz[run_b.idx])[1]
     keep = moved.idx[k.min():k.max() + 1]
+    # and where the surfaces pass within the tolerance of each other: where they part, the curve keeps the
+    # longest stretch where they pass within `_WITHIN` of it (a margin for the curve's own error), and
+    # beyond it the faces keep their data pieces, joined at the curve's ends
+    apart = _apart(si, sj, mid[keep])
+    if apart.max() > tol:
+        within = _longest_run(np.r_[apart <= _WITHIN * tol, False], close=0)
+        if within is None or len(within.idx) < 6:
+            return (f"no curve lies within the tolerance of both surfaces along the seam (they pass "
+                    f"{apart.min():.2f} mm apart at their closest)")
+        keep = keep[within.idx]
+        on = cKDTree(mid[keep]).query(loops[b].xyz[run_b.idx])[1]   # face b's side cut to the same stretch
+        inner = _longest_run(np.r_[(on > 0) & (on < len(keep) - 1), False], close=0)
+        if inner is None or len(inner.idx) < 6:
+            return "the two faces' sides of the seam lie apart where the surfaces pass within the tolerance"
+        idx_b = run_b.idx[inner.idx]
+        runs[b] = _Run(int(idx_b[0]), int(idx_b[-1]), idx_b)
     stretch = mid[keep]
     idx = runs[a].idx[keep]
     runs[a] = _Run(int(idx[0]), int(idx[-1]), idx)
     length = float(np.linalg.norm(np.diff(stretch, axis=0), axis=1).sum())
     if length < 4 * spacing:
         return f"a common curve would be {length:.2f} mm long, under four point spacings"
-    side = loops[b].xyz[run_b.idx[[0, -1]]]      # face b runs the curve forwards if its run starts near C(0)
+    side = loops[b].xyz[runs[b].idx[[0, -1]]]    # face b runs the curve forwards if its run starts near C(0)
     forward = np.linalg.norm(side - stretch[[0, -1]], axis=1).sum() <= \
         np.linalg.norm(side - stretch[[-1, 0]], axis=1).sum()
     try:

@@ -68,7 +68,9 @@ For each pair of neighbouring patches (a seam found by `rgm.fitters.patches.g0_g
 Seams left over the tolerance are handled by `rgm.fitters.patches`: their patches are refitted through a
 common boundary curve (anchors) and shared again here; with `curves`, a seam whose intersection cannot be
 shared may share one curve midway between the surfaces instead (`rgm.fitters.seam_curves`, a `SharedEdge`
-with its `curve`: rebuilt and measured the same way, dropped before any intersection where a loop fails);
+with its `curve`: rebuilt and measured the same way, dropped before any intersection where a loop fails),
+and so may a seam whose shared intersection left it open beyond the edge's ends (`open_ends`: the curve runs
+along the whole seam, the intersection only where the surfaces cross);
 a `cache` keeps each pair's candidate per pair of fits, so that pairs whose patches were not refitted are
 not intersected again.
 """
@@ -601,7 +603,7 @@ def _to_polyline(points, polyline) -> np.ndarray:
 
 
 def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: float, cache=None,
-                     curves: bool = False) -> list:
+                     curves: bool = False, open_ends=()) -> list:
     """Make neighbouring patches share their boundary: for each seam in `gaps` (separate-trim Gaps from
     `g0_gaps`), the intersection of both surfaces in both loops where it can be (module docstring),
     patches[k].shape replaced accordingly. Returns the Gaps: shared ones measured on the shared edge
@@ -610,7 +612,9 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
     the two fits they came from: a pair of fits already seen is not intersected again. With `curves`, a
     seam over `tol` whose intersection cannot be shared gets one curve midway between the surfaces
     (`rgm.fitters.seam_curves`) where one lies within `tol` of both; where a rebuilt loop fails, such
-    curves are dropped before any intersection is."""
+    curves are dropped before any intersection is. A pair in `open_ends`, whose shared intersection left
+    its seam open beyond the edge's ends, shares such a curve instead where one lies within `tol` of both
+    along the whole seam."""
     from rgm.fitters.freeform_part import FreeformShape, _surface_speed
     from rgm.fitters.seam_curves import measure_curve
 
@@ -633,6 +637,9 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
             seen.append((*fits, c))
         if curves and isinstance(c, str) and g.max > tol:
             c = _seam_curve(g.i, g.j, shapes, loops, tol, near, spacing, c)
+        elif curves and (g.i, g.j) in open_ends:
+            curve = _seam_curve(g.i, g.j, shapes, loops, tol, near, spacing, "")
+            c = c if isinstance(curve, str) else curve
         if isinstance(c, str):
             why[(g.i, g.j)] = c
         else:

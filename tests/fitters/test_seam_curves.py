@@ -207,3 +207,45 @@ def test_reverse_runs_a_curve_the_other_way():
         rgm.loads("units mm;\np := plane(pt(0, 0, 0), vec(0, 0, 1));\nq := plane(pt(0, 0, 0), vec(0, 1, 0));\n"
                   "r := reverse(intersect(p, q));\n")
     assert "4:6" in str(err.value) and "intersection has no direction" in str(err.value)
+
+
+def test_a_seam_whose_surfaces_part_shares_a_curve_where_they_pass_within_the_tolerance():
+    """Two strips side by side, 0.3 mm apart in height where they meet for x < 25 and parting to 2.5 mm by
+    x = 40 (z = 0 and z = h(x), a smooth step): at a 0.5 mm tolerance no curve lies within it of both
+    surfaces along the whole seam (the midway points keep to the seam up to x = 29.8), so the curve keeps
+    the stretch where they pass within 0.4 mm of each other (to about x = 26, where h = 0.4), and each face's
+    run is cut to it (the rest of the seam stays data, joined at its ends)."""
+    from scipy.spatial import cKDTree
+
+    from rgm.fitters.freeform_part import fit_freeform
+    from rgm.fitters.patch_base import reach_past
+    from rgm.fitters.seam_curves import seam_curve
+    from rgm.fitters.shared_edges import _Loop, _loop_samples, _seam_runs
+
+    rng = np.random.default_rng(4)
+
+    def h(x):
+        s = np.clip((x - 25) / 10, 0, 1)
+        return 0.3 + 2.2 * s * s * (3 - 2 * s)
+
+    n = 3200
+    x, y = rng.uniform(0, 40, (2, n)), rng.uniform(0, 10, (2, n))
+    clouds = [np.c_[x[0], y[0], rng.normal(0, 0.02, n)], np.c_[x[1], y[1] + 10, h(x[1]) + rng.normal(0, 0.02, n)]]
+    spacing = float(np.median(cKDTree(clouds[0]).query(clouds[0], 2)[0][:, 1]))
+    shapes = [fit_freeform(c, 0.1, cuts=False, params=reach_past(c, c[:, 0] / 40, (c[:, 1] % 10) / 10,
+                                                                  5 * spacing)) for c in clouds]
+    loops = []
+    for k, shape in enumerate(shapes):
+        uv = _loop_samples(shape, spacing)
+        xyz = shape.nurbs().evaluate(uv[:, 0], uv[:, 1])
+        beside = (xyz[:, 1] > 9) if k == 0 else (xyz[:, 1] < 11)     # the side along the other strip
+        loops.append(_Loop(uv, xyz, np.where(beside & (xyz[:, 0] > 1) & (xyz[:, 0] < 39), 1 - k, -1)))
+    runs = _seam_runs(0, 1, loops)
+    assert not isinstance(runs, str), runs
+    c = seam_curve(0, 1, shapes, loops, runs, 0.5, 5 * spacing, spacing)
+    assert not isinstance(c, str), c
+    xyz = c.curve.evaluate(np.linspace(*c.curve.domain, 200))
+    assert xyz[:, 0].min() < 3 and 25 < xyz[:, 0].max() < 27.5
+    assert np.abs(xyz[:, 2] - h(xyz[:, 0]) / 2).max() < 0.05          # midway between the surfaces
+    for k in (0, 1):   # each face's run is cut to the curve's stretch
+        assert loops[k].xyz[c.runs[k].idx, 0].max() < 28

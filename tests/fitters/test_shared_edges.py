@@ -7,6 +7,8 @@ OpenCASCADE moves neighbours that meet an intersection within the tolerance onto
 import sys
 from pathlib import Path
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings
@@ -163,6 +165,42 @@ def top_edge(shape, loop, course):
     rising = bool(x[run.idx[-1]] > x[run.idx[0]])    # does the run go the way the course does (+x)?
     return _Candidate(0, 1, np.asarray(on), {0: np.c_[u, v], 1: np.c_[u, v]}, 0, len(course) - 1, {0: run},
                       {0: rising}, None)
+
+
+def test_a_seam_left_open_beyond_its_intersection_may_share_one_curve_along_it_instead():
+    """`share_boundaries(open_ends=...)`: a pair whose shared intersection left its seam open beyond the
+    edge's ends (the YCB meat can's mantle and bottom meet along a fillet, and their intersection followed
+    66 of their 155 mm) shares one curve midway between the surfaces along the whole seam instead, where
+    one lies within the tolerance of both. On the bent sheet, where the surfaces cross, the curve lands on
+    their crease: both faces' edges on it meet within the tolerance; without `open_ends` the
+    intersection is kept."""
+    from rgm.fitters.creases import median_spacing
+    from rgm.fitters.shared_edges import share_boundaries
+    from scipy.spatial import cKDTree
+
+    p = bent_sheet(np.random.default_rng(2), 6000, 0.03)
+    plain = fit_patches(p, TOL, share=False)
+    spacing = median_spacing(cKDTree(p))
+    seam = [g for g in plain.gaps if (g.i, g.j) == (0, 1)]
+    assert len(plain.patches) == 2 and seam
+
+    def shared(**kwargs):
+        copy = [replace(q) for q in plain.patches]
+        (g,) = share_boundaries(p, copy, seam, TOL, 5 * spacing, spacing, **kwargs)
+        return g, copy
+
+    crossing, _ = shared(curves=True)
+    assert crossing.shared and not crossing.curve
+    g, patches = shared(curves=True, open_ends={(0, 1)})
+    assert g.shared and g.curve and g.max <= TOL
+    assert g.length >= 0.8 * crossing.length      # along the seam as the intersection was
+    # the curve lies on the crease y = 0, z = 0.004 x²
+    edge = [q for q in patches[0].shape.outer if getattr(q, "curve", None) is not None]
+    assert len(edge) == 1
+    xyz = edge[0].curve.evaluate(np.linspace(*edge[0].curve.domain, 50))
+    assert np.abs(xyz[:, 1]).max() < TOL / 2 and np.abs(xyz[:, 2] - 0.004 * xyz[:, 0] ** 2).max() < TOL / 2
+    text, _ = patches_text(type(plain)(patches, [g], plain.unassigned, []), TOL, title="sheet")
+    assert "seam_1_2 := bspline" in text
 
 
 def test_a_thin_face_takes_a_shared_edge_that_moves_its_side_but_not_one_that_runs_off_its_data():
