@@ -70,7 +70,7 @@ common boundary curve (anchors) and shared again here; with `curves`, a seam who
 shared may share one curve midway between the surfaces instead (`rgm.fitters.seam_curves`, a `SharedEdge`
 with its `curve`: rebuilt and measured the same way, dropped before any intersection where a loop fails),
 and so may a seam whose shared intersection left it open beyond the edge's ends (`open_ends`: the curve runs
-along the whole seam, the intersection only where the surfaces cross);
+along the seam wherever the surfaces pass within the tolerance, the intersection only where they cross);
 a `cache` keeps each pair's candidate per pair of fits, so that pairs whose patches were not refitted are
 not intersected again.
 """
@@ -613,8 +613,8 @@ def share_boundaries(points, patches, gaps, tol: float, near: float, spacing: fl
     seam over `tol` whose intersection cannot be shared gets one curve midway between the surfaces
     (`rgm.fitters.seam_curves`) where one lies within `tol` of both; where a rebuilt loop fails, such
     curves are dropped before any intersection is. A pair in `open_ends`, whose shared intersection left
-    its seam open beyond the edge's ends, shares such a curve instead where one lies within `tol` of both
-    along the whole seam."""
+    its seam open beyond the edge's ends, shares such a curve instead where there is one (along the whole
+    seam where the surfaces pass within `tol` of each other, `rgm.fitters.seam_curves.seam_curve`)."""
     from rgm.fitters.freeform_part import FreeformShape, _surface_speed
     from rgm.fitters.seam_curves import measure_curve
 
