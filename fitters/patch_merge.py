@@ -122,11 +122,7 @@ def take_rims(points: np.ndarray, patches: list, fit, rims, spacing: float, tol:
     within twice the control points they had; otherwise the pairwise merge still tries each."""
     notes, tried = [], set()
     while True:
-        for wrap in sorted({_unit(patches, i) for i in range(len(patches))}):
-            key = b"".join(patches[r].indices.tobytes() for r in wrap)
-            if len(wrap) == 1 or key in tried:
-                continue
-            tried.add(key)
+        for wrap in _untried_wraps(patches, tried):
             near = sorted({b if a in wrap else a for a, b in neighbour_pairs(points, patches, spacing)
                            if (a in wrap) != (b in wrap) and len(_unit(patches, b if a in wrap else a)) == 1})
             sides = [np.concatenate([patches[r].indices for r in wrap])] + [patches[r].indices for r in near]
@@ -160,11 +156,9 @@ def claim_rims(points: np.ndarray, patches: list, fit, on_profile, tol: float):
     `fit(indices, sides)` as for `merge_neighbours`."""
     notes, tried = [], set()
     while True:
-        for wrap in sorted({_unit(patches, i) for i in range(len(patches))}):
-            key = b"".join(patches[r].indices.tobytes() for r in wrap)
-            if len(wrap) == 1 or patches[wrap[0]].base.kind != "swept" or key in tried:
+        for wrap in _untried_wraps(patches, tried):
+            if patches[wrap[0]].base.kind != "swept":
                 continue
-            tried.add(key)
             mine = np.concatenate([patches[r].indices for r in wrap])
             others = [r for r in range(len(patches)) if r not in wrap and patches[r].base.wrap is None]
             theirs = np.concatenate([patches[r].indices for r in others] + [np.zeros(0, int)])
@@ -186,12 +180,27 @@ def claim_rims(points: np.ndarray, patches: list, fit, on_profile, tol: float):
                 continue
             notes.append(f"a swept wrap took {len(take)} points of {len(donors)} patches that its surface runs "
                          f"through on its profile ({sum(len(left) < 16 for left in rest)} of them left out)")
-            tried.add(b"".join(f.indices.tobytes() for f in faces))      # claimed once
+            tried.add(_key(faces))      # claimed once
             patches = [p for r, p in enumerate(patches) if r not in set(wrap) | set(donors)] + faces + \
                 [f for got in refits for f in got]
             break
         else:
             return patches, notes
+
+
+def _key(faces: list) -> bytes:
+    """What a closed wrap's faces (PatchFits) hold, as one key: the same points, the same wrap."""
+    return b"".join(f.indices.tobytes() for f in faces)
+
+
+def _untried_wraps(patches: list, tried: set):
+    """The closed wraps among `patches` (their faces' indices) not in `tried` (keys, `_key`), each added
+    to it as it is given: a wrap that took or claimed nothing is not offered the same again."""
+    for wrap in sorted({_unit(patches, i) for i in range(len(patches))}):
+        key = _key([patches[r] for r in wrap])
+        if len(wrap) > 1 and key not in tried:
+            tried.add(key)
+            yield wrap
 
 
 def _labels(sides: list[np.ndarray]) -> np.ndarray:
